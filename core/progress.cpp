@@ -1,0 +1,11 @@
+#include "core/progress.h"
+
+#include "core/errors.h"
+
+namespace organsmith {
+
+void Progress::check_cancelled() const {
+  if (cancelled()) throw Cancelled();
+}
+
+}  // namespace organsmith

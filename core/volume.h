@@ -1,0 +1,50 @@
+#pragma once
+// Scalar CT volume and label map on a regular grid, LPS millimetres.
+
+#include "core/grid.h"
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace organsmith {
+
+/// A CT volume in Hounsfield units (rescale slope/intercept already applied).
+/// `hu` holds grid.voxel_count() values, i fastest, then j, then k.
+struct Volume {
+  ImageGrid grid;
+  std::vector<float> hu;
+
+  float at(std::int64_t i, std::int64_t j, std::int64_t k) const { return hu[grid.offset(i, j, k)]; }
+  /// Pointer to the first voxel of slice k (size_vox[0] * size_vox[1] values).
+  const float* slice(std::int64_t k) const { return hu.data() + k * grid.slice_voxel_count(); }
+};
+
+/// Label values shared by every stage. 0 is background.
+enum class Label : std::uint8_t {
+  background = 0,
+  gallbladder = 1,
+  trachea = 2,
+  liver = 3,
+  lungs = 4,
+  body = 5,  ///< soft tissue and bone inside the skin that no other label claims
+};
+
+/// Lower-case name of a label ("gallbladder", …); "label<N>" for values without a name.
+std::string label_name(std::uint8_t value);
+
+/// Per-voxel uint8 labels on the grid of a Volume (values: see `Label`).
+struct LabelMap {
+  ImageGrid grid;
+  std::vector<std::uint8_t> labels;
+
+  std::uint8_t at(std::int64_t i, std::int64_t j, std::int64_t k) const {
+    return labels[grid.offset(i, j, k)];
+  }
+  /// Number of voxels carrying `value`.
+  std::int64_t count(std::uint8_t value) const;
+  /// Volume of the voxels carrying `value`, in millilitres.
+  double volume_ml(std::uint8_t value) const;
+};
+
+}  // namespace organsmith
