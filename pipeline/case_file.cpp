@@ -1,0 +1,239 @@
+#include "pipeline/case_file.h"
+
+#include "core/errors.h"
+#include "default_case_toml.h"  // generated from data/default_case.toml
+
+#include <toml++/toml.h>
+
+#include <algorithm>
+#include <fstream>
+#include <set>
+#include <sstream>
+
+namespace organsmith {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string where(const toml::node& n) {
+  const auto& src = n.source();
+  return src.begin ? " (line " + std::to_string(src.begin.line) + ")" : std::string();
+}
+
+/// Reads a table and rejects keys it does not know, so that a typo never silently falls back
+/// to a default.
+class Table {
+ public:
+  Table(const toml::table* t, std::string name, fs::path origin)
+      : t_(t), name_(std::move(name)), origin_(std::move(origin)) {}
+
+  void only(const std::set<std::string>& keys) const {
+    if (!t_) return;
+    for (const auto& [k, v] : *t_) {
+      if (!keys.count(std::string(k.str()))) {
+        std::string known;
+        for (const auto& key : keys) known += (known.empty() ? "" : ", ") + key;
+        throw CaseFileError("unknown key '" + std::string(k.str()) + "' in [" + name_ + "]" + where(v),
+                            origin_, "known keys: " + known);
+      }
+    }
+  }
+
+  template <typename T>
+  void get(const char* key, T& out) const {
+    if (!t_) return;
+    const toml::node* n = t_->get(key);
+    if (!n) return;
+    if constexpr (std::is_same_v<T, bool>) {
+      if (auto v = n->value_exact<bool>()) return void(out = *v);
+    } else if constexpr (std::is_integral_v<T>) {
+      if (auto v = n->value_exact<std::int64_t>()) return void(out = T(*v));
+    } else if constexpr (std::is_floating_point_v<T>) {
+      if (auto v = n->value<double>()) return void(out = T(*v));
+    } else {
+      if (auto v = n->value_exact<std::string>()) return void(out = *v);
+    }
+    throw CaseFileError("[" + name_ + "] " + key + " has the wrong type" + where(*n), origin_,
+                        std::string("expected ") + type_name<T>());
+  }
+
+  std::optional<Eigen::Vector3d> vec3(const char* key) const {
+    if (!t_) return std::nullopt;
+    const toml::node* n = t_->get(key);
+    if (!n) return std::nullopt;
+    const toml::array* a = n->as_array();
+    Eigen::Vector3d v;
+    if (a && a->size() == 3) {
+      bool ok = true;
+      for (int i = 0; i < 3; ++i) {
+        auto x = (*a)[std::size_t(i)].value<double>();
+        ok = ok && x.has_value();
+        if (x) v[i] = *x;
+      }
+      if (ok) return v;
+    }
+    throw CaseFileError("[" + name_ + "] " + key + " must be an array of three numbers" + where(*n),
+                        origin_, std::string("e.g. ") + key + " = [12.5, -40.0, 310.0]");
+  }
+
+ private:
+  template <typename T>
+  static const char* type_name() {
+    if constexpr (std::is_same_v<T, bool>) return "true or false";
+    else if constexpr (std::is_integral_v<T>) return "an integer";
+    else if constexpr (std::is_floating_point_v<T>) return "a number";
+    else return "a string";
+  }
+  const toml::table* t_;
+  std::string name_;
+  fs::path origin_;
+};
+
+void fail_if(bool bad, const std::string& what, const fs::path& origin, const std::string& hint) {
+  if (bad) throw CaseFileError(what, origin, hint);
+}
+
+}  // namespace
+
+const std::vector<std::string>& known_organs() {
+  static const std::vector<std::string> organs = {"gallbladder", "trachea"};
+  return organs;
+}
+
+CaseFile parse_case(const std::string& text, const fs::path& origin) {
+  toml::table root;
+  try {
+    root = toml::parse(text, origin.string());
+  } catch (const toml::parse_error& e) {
+    throw CaseFileError("not valid TOML at line " + std::to_string(e.source().begin.line) + ": " +
+                            std::string(e.description()),
+                        origin, "fix the syntax (see README.md, 'Case file')");
+  }
+  CaseFile c;
+  c.source = origin;
+  const fs::path base = origin.empty() ? fs::current_path() : fs::absolute(origin).parent_path();
+
+  Table(&root, "top level", origin).only({"case", "phantom", "ingest", "organ", "output", "stages"});
+
+  Table cs(root["case"].as_table(), "case", origin);
+  cs.only({"name", "input"});
+  std::string input = "phantom";
+  cs.get("name", c.name);
+  cs.get("input", input);
+  fail_if(input.empty(), "[case] input is empty", origin,
+          "give \"phantom\" or a DICOM directory / NIfTI / NRRD / MHA path");
+  c.synthesize_phantom = input == "phantom";
+  if (!c.synthesize_phantom) c.input = fs::weakly_canonical(base / input);
+
+  Table ph(root["phantom"].as_table(), "phantom", origin);
+  ph.only({"seed", "size", "slice_mm", "fov_mm", "extent_mm", "noise_hu", "blur_mm"});
+  ph.get("seed", c.phantom.seed);
+  ph.get("size", c.phantom.size_vox);
+  ph.get("slice_mm", c.phantom.slice_mm);
+  ph.get("fov_mm", c.phantom.fov_mm);
+  ph.get("extent_mm", c.phantom.extent_mm);
+  ph.get("noise_hu", c.phantom.noise_hu);
+  ph.get("blur_mm", c.phantom.blur_mm);
+  fail_if(c.phantom.size_vox < 32 || c.phantom.size_vox > 2048, "[phantom] size must be 32–2048",
+          origin, "512 is the default");
+  fail_if(!(c.phantom.slice_mm > 0.1 && c.phantom.slice_mm <= 20), "[phantom] slice_mm must be in (0.1, 20]",
+          origin, "2.5 is the default");
+
+  Table in(root["ingest"].as_table(), "ingest", origin);
+  in.only({"series", "allow_modality", "max_memory_mb", "spacing_tolerance", "tilt_tolerance_deg"});
+  std::int64_t max_mb = 0;
+  in.get("series", c.ingest.series_uid);
+  in.get("allow_modality", c.ingest.allow_modality);
+  in.get("max_memory_mb", max_mb);
+  in.get("spacing_tolerance", c.ingest.spacing_tolerance);
+  in.get("tilt_tolerance_deg", c.ingest.tilt_tolerance_deg);
+  fail_if(max_mb < 0, "[ingest] max_memory_mb must be ≥ 0", origin, "0 means 60 % of physical memory");
+  c.ingest.max_memory_bytes = max_mb << 20;
+
+  if (const toml::node* organs = root.get("organ")) {
+    const toml::array* arr = organs->as_array();
+    fail_if(!arr, "'organ' must be an array of tables ([[organ]])" + where(*organs), origin,
+            "write each organ as [[organ]] followed by name = \"…\"");
+    for (const auto& node : *arr) {
+      const toml::table* t = node.as_table();
+      fail_if(!t, "each [[organ]] entry must be a table" + where(node), origin, "");
+      Table ot(t, "organ", origin);
+      ot.only({"name", "seed_lps_mm", "seed_ijk"});
+      OrganSpec o;
+      ot.get("name", o.name);
+      const auto& known = known_organs();
+      fail_if(std::find(known.begin(), known.end(), o.name) == known.end(),
+              "unknown organ '" + o.name + "'" + where(node), origin, "known organs: gallbladder, trachea");
+      o.seed_lps_mm = ot.vec3("seed_lps_mm");
+      o.seed_ijk = ot.vec3("seed_ijk");
+      fail_if(o.seed_lps_mm && o.seed_ijk, "organ '" + o.name + "' has both seed_lps_mm and seed_ijk",
+              origin, "give one of them");
+      for (const auto& other : c.organs)
+        fail_if(other.name == o.name, "organ '" + o.name + "' is listed twice", origin, "list each organ once");
+      c.organs.push_back(std::move(o));
+    }
+  }
+
+  Table out(root["output"].as_table(), "output", origin);
+  out.only({"dir"});
+  std::string dir = "out";
+  out.get("dir", dir);
+  c.out_dir = origin.empty() ? fs::path(dir) : base / dir;
+
+  if (const toml::table* stages = root["stages"].as_table()) {
+    std::ostringstream js;
+    js << toml::json_formatter{*stages};
+    c.other_stages = nlohmann::json::parse(js.str());
+  }
+  return c;
+}
+
+CaseFile load_case_file(const fs::path& path) {
+  std::ifstream in(path);
+  if (!in)
+    throw CaseFileError("cannot open the case file", path,
+                        "check the path; `organsmith run` without a case runs the embedded default");
+  std::stringstream text;
+  text << in.rdbuf();
+  return parse_case(text.str(), path);
+}
+
+const std::string& default_case_text() {
+  static const std::string text(kDefaultCaseToml);
+  return text;
+}
+
+CaseFile default_case() {
+  CaseFile c = parse_case(default_case_text(), {});
+  c.source.clear();
+  return c;
+}
+
+nlohmann::json to_json(const CaseFile& c) {
+  nlohmann::json j;
+  j["name"] = c.name;
+  j["input"] = c.synthesize_phantom ? std::string("phantom") : c.input.string();
+  j["phantom"] = {{"seed", c.phantom.seed},          {"size_vox", c.phantom.size_vox},
+                  {"slice_mm", c.phantom.slice_mm},  {"fov_mm", c.phantom.fov_mm},
+                  {"extent_mm", c.phantom.extent_mm}, {"blur_mm", c.phantom.blur_mm},
+                  {"noise_hu", c.phantom.noise_hu}};
+  j["ingest"] = {{"series", c.ingest.series_uid},
+                 {"allow_modality", c.ingest.allow_modality},
+                 {"max_memory_mb", c.ingest.max_memory_bytes >> 20},
+                 {"spacing_tolerance", c.ingest.spacing_tolerance},
+                 {"gap_factor", c.ingest.gap_factor},
+                 {"tilt_tolerance_deg", c.ingest.tilt_tolerance_deg}};
+  j["organs"] = nlohmann::json::array();
+  for (const auto& o : c.organs) {
+    nlohmann::json oj = {{"name", o.name}};
+    if (o.seed_lps_mm) oj["seed_lps_mm"] = {o.seed_lps_mm->x(), o.seed_lps_mm->y(), o.seed_lps_mm->z()};
+    if (o.seed_ijk) oj["seed_ijk"] = {o.seed_ijk->x(), o.seed_ijk->y(), o.seed_ijk->z()};
+    j["organs"].push_back(oj);
+  }
+  j["output"] = {{"dir", c.out_dir.string()}};
+  j["stages"] = c.other_stages;
+  return j;
+}
+
+}  // namespace organsmith

@@ -1,0 +1,55 @@
+#pragma once
+// Case files (TOML): what to read, which organs to model with which seeds, stage options.
+// The full reference is in README.md ("Case file").
+
+#include "pipeline/ingest.h"
+#include "pipeline/phantom.h"
+
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace organsmith {
+
+/// One organ to model and where to start looking for it.
+struct OrganSpec {
+  std::string name;                          ///< "gallbladder" or "trachea"
+  std::optional<Eigen::Vector3d> seed_lps_mm; ///< seed in DICOM patient coordinates, mm
+  std::optional<Eigen::Vector3d> seed_ijk;    ///< or a seed as a voxel index (converted once the grid is known)
+};
+
+/// A parsed and validated case.
+struct CaseFile {
+  std::filesystem::path source;   ///< the file it came from; empty for the embedded default
+  std::string name = "case";
+  bool synthesize_phantom = false; ///< input = "phantom"
+  std::filesystem::path input;     ///< absolute input path (when not synthesizing)
+  PhantomOptions phantom;
+  IngestOptions ingest;
+  std::vector<OrganSpec> organs;
+  std::filesystem::path out_dir = "out";
+  /// Option tables of stages this build does not provide yet, kept verbatim for the manifest.
+  nlohmann::json other_stages = nlohmann::json::object();
+};
+
+/// Organ names organsmith knows.
+const std::vector<std::string>& known_organs();
+
+/// Parses a case file. Relative paths in it are taken relative to the file's directory.
+/// Throws CaseFileError naming the file, line and key on any mistake (unknown keys included).
+CaseFile load_case_file(const std::filesystem::path& path);
+/// Parses case text; `origin` names it in errors and anchors relative paths.
+CaseFile parse_case(const std::string& toml_text, const std::filesystem::path& origin);
+/// The embedded default case (data/default_case.toml).
+CaseFile default_case();
+/// The embedded default case's text.
+const std::string& default_case_text();
+
+/// The case as resolved options, for the manifest.
+nlohmann::json to_json(const CaseFile& c);
+
+}  // namespace organsmith

@@ -1,0 +1,615 @@
+// DICOM series discovery, validation and decoding with GDCM.
+//
+// Two passes: headers of every file first (cheap: reading stops at the pixel data), so that the
+// series can be chosen and its geometry checked before anything is decoded; then the chosen
+// series' pixels, decoded in parallel (JPEG 2000 decoding is CPU-bound).
+
+#include "core/errors.h"
+#include "pipeline/dicom.h"
+
+#include <gdcmAttribute.h>
+#include <gdcmImage.h>
+#include <gdcmImageHelper.h>
+#include <gdcmImageReader.h>
+#include <gdcmReader.h>
+#include <gdcmTrace.h>
+#include <gdcmTransferSyntax.h>
+#include <gdcmUIDs.h>
+#include <spdlog/spdlog.h>
+#include <tbb/parallel_for.h>
+#include <unistd.h>
+
+#include <Eigen/Geometry>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <iomanip>
+#include <iterator>
+#include <map>
+#include <mutex>
+#include <numeric>
+#include <optional>
+#include <sstream>
+
+namespace organsmith {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const gdcm::Tag kPixelData(0x7fe0, 0x0010);
+
+/// Header facts of one file, as far as ingest needs them.
+struct FileHeader {
+  fs::path path;
+  std::string series_uid, modality, description, sop_class;
+  std::string transfer_syntax;
+  int rows = 0, columns = 0, frames = 1;
+  std::optional<Eigen::Vector3d> position_lps_mm;  // (0020,0032)
+  std::optional<std::array<double, 6>> orientation;  // (0020,0037)
+  std::optional<Eigen::Vector2d> pixel_spacing_mm;   // (0028,0030): row spacing, column spacing
+  double slice_thickness_mm = 0.0;
+  double gantry_tilt_deg = 0.0;
+  bool has_pixel_data = false;
+};
+
+std::string trimmed(std::string s) {
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
+  std::size_t b = 0;
+  while (b < s.size() && s[b] == ' ') ++b;
+  return s.substr(b);
+}
+
+std::string string_value(const gdcm::DataSet& ds, const gdcm::Tag& tag) {
+  if (!ds.FindDataElement(tag)) return {};
+  const gdcm::DataElement& de = ds.GetDataElement(tag);
+  const gdcm::ByteValue* bv = de.GetByteValue();
+  if (!bv || de.IsEmpty()) return {};
+  return trimmed(std::string(bv->GetPointer(), bv->GetLength()));
+}
+
+std::vector<double> numbers(const std::string& s) {
+  std::vector<double> out;
+  std::stringstream in(s);
+  std::string item;
+  while (std::getline(in, item, '\\')) {
+    try {
+      out.push_back(std::stod(item));
+    } catch (...) {
+      return {};
+    }
+  }
+  return out;
+}
+
+template <std::uint16_t G, std::uint16_t E>
+int us_value(const gdcm::DataSet& ds) {
+  gdcm::Attribute<G, E> at{};
+  if (!ds.FindDataElement(at.GetTag()) || ds.GetDataElement(at.GetTag()).IsEmpty()) return 0;
+  at.SetFromDataSet(ds);
+  return int(at.GetValue());
+}
+
+std::uint32_t le32(const unsigned char* p) { return p[0] | (p[1] << 8) | (p[2] << 16) | (std::uint32_t(p[3]) << 24); }
+std::uint16_t le16(const unsigned char* p) { return std::uint16_t(p[0] | (p[1] << 8)); }
+
+/// Walks the data elements of a Part-10 file up to and including the pixel data and checks that
+/// every declared length fits in the file. GDCM aborts on some truncated files (an assertion
+/// in its compatibility reader), so truncation must be caught before GDCM sees the file.
+/// Sequences and encapsulated pixel data with undefined length end the walk (GDCM then checks).
+bool structurally_complete(const fs::path& path, std::string& why) {
+  std::error_code ec;
+  const std::uint64_t n = fs::file_size(path, ec);
+  std::ifstream in(path, std::ios::binary);
+  unsigned char h[12];
+  auto read_at = [&](std::uint64_t pos, std::size_t bytes) {
+    if (pos + bytes > n) return false;
+    in.seekg(std::streamoff(pos));
+    in.read(reinterpret_cast<char*>(h), std::streamsize(bytes));
+    return bool(in);
+  };
+  if (ec || !read_at(128, 4) || std::memcmp(h, "DICM", 4) != 0) {
+    why = "has no DICOM preamble";
+    return false;
+  }
+  auto long_form = [](const unsigned char* vr) {
+    static const char* kinds[] = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ", "SV", "UC", "UN", "UR", "UT", "UV"};
+    for (const char* k : kinds)
+      if (vr[0] == k[0] && vr[1] == k[1]) return true;
+    return false;
+  };
+  std::uint64_t pos = 132;
+  bool explicit_vr = true, in_meta = true;
+  while (pos < n) {
+    if (!read_at(pos, std::min<std::uint64_t>(12, n - pos)) || pos + 8 > n) break;
+    const std::uint16_t group = le16(h), element = le16(h + 2);
+    if (in_meta && group != 0x0002) {
+      in_meta = false;
+      explicit_vr = std::isupper(h[4]) && std::isupper(h[5]);  // implicit VR has a length here
+    }
+    std::uint64_t length;
+    std::uint64_t header = 8;
+    if (explicit_vr || in_meta) {
+      if (long_form(h + 4)) {
+        if (pos + 12 > n) break;
+        length = le32(h + 8);
+        header = 12;
+      } else {
+        length = le16(h + 6);
+      }
+    } else {
+      length = le32(h + 4);
+    }
+    if (length == 0xffffffffu) return true;  // undefined length (sequence, encapsulated pixels): GDCM checks the rest
+    if (pos + header + length > n) {
+      std::ostringstream m;
+      m << "is truncated: element (" << std::hex << std::setfill('0') << std::setw(4) << group << ","
+        << std::setw(4) << element << std::dec << ") needs " << length << " bytes but only "
+        << (n - pos - header) << " remain";
+      why = m.str();
+      return false;
+    }
+    if (group == 0x7fe0 && element == 0x0010) return true;
+    pos += header + length;
+  }
+  if (pos != n) {
+    why = "is truncated inside an element header";
+    return false;
+  }
+  return true;
+}
+
+/// Reads the header of `path`; nullopt when it is not DICOM or cannot be parsed.
+std::optional<FileHeader> read_header(const fs::path& path) {
+  gdcm::Reader reader;
+  reader.SetFileName(path.string().c_str());
+  if (!reader.ReadUpToTag(kPixelData)) return std::nullopt;
+  const gdcm::File& file = reader.GetFile();
+  const gdcm::DataSet& ds = file.GetDataSet();
+  FileHeader h;
+  h.path = path;
+  h.sop_class = string_value(ds, gdcm::Tag(0x0008, 0x0016));
+  h.series_uid = string_value(ds, gdcm::Tag(0x0020, 0x000e));
+  h.modality = string_value(ds, gdcm::Tag(0x0008, 0x0060));
+  h.description = string_value(ds, gdcm::Tag(0x0008, 0x103e));
+  {
+    gdcm::UIDs uid;
+    const char* ts = gdcm::TransferSyntax::GetTSString(file.GetHeader().GetDataSetTransferSyntax());
+    h.transfer_syntax = ts && uid.SetFromUID(ts) ? uid.GetName() : (ts ? ts : "unknown");
+  }
+  h.rows = us_value<0x0028, 0x0010>(ds);
+  h.columns = us_value<0x0028, 0x0011>(ds);
+  if (const auto f = numbers(string_value(ds, gdcm::Tag(0x0028, 0x0008))); f.size() == 1 && f[0] >= 1)
+    h.frames = int(f[0]);
+  if (const auto p = numbers(string_value(ds, gdcm::Tag(0x0020, 0x0032))); p.size() == 3)
+    h.position_lps_mm = Eigen::Vector3d(p[0], p[1], p[2]);
+  if (const auto o = numbers(string_value(ds, gdcm::Tag(0x0020, 0x0037))); o.size() == 6)
+    h.orientation = std::array<double, 6>{o[0], o[1], o[2], o[3], o[4], o[5]};
+  if (const auto s = numbers(string_value(ds, gdcm::Tag(0x0028, 0x0030))); s.size() == 2)
+    h.pixel_spacing_mm = Eigen::Vector2d(s[0], s[1]);
+  if (const auto t = numbers(string_value(ds, gdcm::Tag(0x0018, 0x0050))); t.size() == 1)
+    h.slice_thickness_mm = t[0];
+  if (const auto g = numbers(string_value(ds, gdcm::Tag(0x0018, 0x1120))); g.size() == 1)
+    h.gantry_tilt_deg = g[0];
+  // ReadUpToTag stops before the pixel data element, so its presence is judged from the image
+  // attributes; a truncated pixel payload is caught when decoding.
+  h.has_pixel_data = h.rows > 0 && h.columns > 0;
+  return h;
+}
+
+std::vector<fs::path> list_files(const fs::path& input) {
+  std::vector<fs::path> files;
+  if (fs::is_regular_file(input)) return {input};
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(input, fs::directory_options::skip_permission_denied, ec);
+       it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (ec) break;
+    if (it->is_regular_file(ec)) files.push_back(it->path());
+  }
+  // A stable order makes warnings and tie-breaks reproducible; geometry never depends on it.
+  std::sort(files.begin(), files.end());
+  return files;
+}
+
+std::int64_t physical_memory_bytes() {
+  const long pages = sysconf(_SC_PHYS_PAGES);
+  const long page = sysconf(_SC_PAGE_SIZE);
+  return pages > 0 && page > 0 ? std::int64_t(pages) * page : std::int64_t(8) << 30;
+}
+
+std::string fmt_mm(double v) {
+  std::ostringstream s;
+  s.precision(2);
+  s << std::fixed << v << " mm";
+  return s.str();
+}
+
+SeriesSummary summarize(const std::vector<FileHeader>& files) {
+  SeriesSummary s;
+  const FileHeader& h = files.front();
+  s.series_uid = h.series_uid;
+  s.modality = h.modality;
+  s.description = h.description;
+  s.rows = h.rows;
+  s.columns = h.columns;
+  s.transfer_syntax = h.transfer_syntax;
+  for (const auto& f : files) s.files += f.frames;
+  return s;
+}
+
+/// Decodes one file into float HU values (rescale applied), columns × rows × frames.
+bool decode(const fs::path& path, float* out, std::size_t expected, std::string& why) {
+  gdcm::ImageReader reader;
+  reader.SetFileName(path.string().c_str());
+  if (!reader.Read()) {
+    why = "cannot be decoded (truncated or corrupt)";
+    return false;
+  }
+  const gdcm::Image& image = reader.GetImage();
+  const gdcm::PixelFormat& pf = image.GetPixelFormat();
+  if (pf.GetSamplesPerPixel() != 1) {
+    why = "is not a greyscale image";
+    return false;
+  }
+  const std::size_t n = std::size_t(image.GetDimension(0)) * image.GetDimension(1) *
+                        (image.GetNumberOfDimensions() > 2 ? image.GetDimension(2) : 1);
+  std::vector<char> raw(image.GetBufferLength());
+  if (raw.size() < n * pf.GetPixelSize() || !image.GetBuffer(raw.data())) {
+    why = "has incomplete pixel data (truncated)";
+    return false;
+  }
+  if (n != expected) {
+    why = "holds " + std::to_string(n) + " pixels where the series' slices hold " + std::to_string(expected);
+    return false;
+  }
+  const double slope = image.GetSlope();
+  const double intercept = image.GetIntercept();
+  auto convert = [&](auto* px) {
+    for (std::size_t a = 0; a < n; ++a) out[a] = float(double(px[a]) * slope + intercept);
+  };
+  switch (pf.GetScalarType()) {
+    case gdcm::PixelFormat::INT16: convert(reinterpret_cast<const std::int16_t*>(raw.data())); break;
+    case gdcm::PixelFormat::UINT16: convert(reinterpret_cast<const std::uint16_t*>(raw.data())); break;
+    case gdcm::PixelFormat::INT8: convert(reinterpret_cast<const std::int8_t*>(raw.data())); break;
+    case gdcm::PixelFormat::UINT8: convert(reinterpret_cast<const std::uint8_t*>(raw.data())); break;
+    case gdcm::PixelFormat::INT32: convert(reinterpret_cast<const std::int32_t*>(raw.data())); break;
+    case gdcm::PixelFormat::UINT32: convert(reinterpret_cast<const std::uint32_t*>(raw.data())); break;
+    default:
+      why = std::string("has an unsupported pixel type ") + pf.GetScalarTypeAsString();
+      return false;
+  }
+  // Bits stored below bits allocated: GDCM already masks them for us when decoding.
+  if (image.GetPhotometricInterpretation() == gdcm::PhotometricInterpretation::MONOCHROME1) {
+    why = "is MONOCHROME1 (inverted greyscale), which CT does not use";
+    return false;
+  }
+  return true;
+}
+
+void check_modality(const SeriesSummary& s, const IngestOptions& options, IngestReport& report,
+                    const fs::path& input) {
+  if (s.modality == "CT") return;
+  const std::string msg = "series " + s.series_uid + " has modality '" + s.modality + "', not CT";
+  if (!options.allow_modality)
+    throw InputError(ExitCode::wrong_modality, msg, input,
+                     "organsmith's organ presets assume Hounsfield units; pass --allow-modality to "
+                     "read it anyway");
+  report.warnings.push_back(msg + " (accepted: --allow-modality)");
+}
+
+void check_memory(std::int64_t voxels, const IngestOptions& options, const fs::path& input) {
+  const std::int64_t budget =
+      options.max_memory_bytes > 0 ? options.max_memory_bytes : physical_memory_bytes() * 6 / 10;
+  const std::int64_t need = voxels * std::int64_t(sizeof(float));
+  if (voxels <= 0 || need > budget) {
+    std::ostringstream m;
+    m << "the volume needs " << need / (1 << 20) << " MiB but the memory budget is "
+      << budget / (1 << 20) << " MiB";
+    throw InputError(ExitCode::too_large, m.str(), input,
+                     "crop or downsample the series, or raise the budget with --max-memory-mb");
+  }
+}
+
+/// Reads a single multi-frame file; GDCM resolves per-frame geometry (enhanced CT).
+IngestResult read_multiframe(const FileHeader& h, const IngestOptions& options, Progress& progress) {
+  IngestResult result;
+  result.report.format = "DICOM multi-frame";
+  result.report.series = summarize({h});
+  check_modality(result.report.series, options, result.report, h.path);
+  check_memory(std::int64_t(h.rows) * h.columns * h.frames, options, h.path);
+  progress.report(0.0, "decoding multi-frame DICOM");
+  std::string why;
+  const std::size_t n = std::size_t(h.rows) * std::size_t(h.columns) * std::size_t(h.frames);
+  result.volume.hu.resize(n);
+  if (!decode(h.path, result.volume.hu.data(), n, why))
+    throw InputError(ExitCode::corrupt_file, "the multi-frame DICOM file " + why, h.path,
+                     "re-export or re-transfer the file");
+  gdcm::ImageReader reader;
+  reader.SetFileName(h.path.string().c_str());
+  reader.Read();
+  const gdcm::Image& image = reader.GetImage();
+  ImageGrid& g = result.volume.grid;
+  g.size_vox = {image.GetDimension(0), image.GetDimension(1),
+                image.GetNumberOfDimensions() > 2 ? image.GetDimension(2) : 1};
+  const double* sp = image.GetSpacing();
+  const double* org = image.GetOrigin();
+  const double* dc = image.GetDirectionCosines();
+  g.spacing_mm = {sp[0], sp[1], sp[2] > 0 ? sp[2] : 1.0};
+  g.origin_lps_mm = {org[0], org[1], org[2]};
+  const Eigen::Vector3d row(dc[0], dc[1], dc[2]), col(dc[3], dc[4], dc[5]);
+  g.direction_lps.col(0) = row.normalized();
+  g.direction_lps.col(1) = col.normalized();
+  g.direction_lps.col(2) = row.cross(col).normalized();
+  g.validate();
+  progress.report(1.0, "decoding multi-frame DICOM");
+  return result;
+}
+
+/// Sorted slices of one series and its geometry, validated.
+struct Stack {
+  std::vector<const FileHeader*> slices;  // sorted along the normal
+  ImageGrid grid;
+};
+
+Stack build_stack(std::vector<const FileHeader*> slices, const IngestOptions& options,
+                  const std::vector<fs::path>& corrupt, const fs::path& input) {
+  const FileHeader& first = *slices.front();
+  if (!first.orientation || !first.pixel_spacing_mm)
+    throw InputError(ExitCode::unsupported_input,
+                     "slice lacks Image Orientation (Patient) or Pixel Spacing", first.path,
+                     "organsmith needs patient geometry to place the organs in millimetres");
+  const auto& o = *first.orientation;
+  const Eigen::Vector3d row = Eigen::Vector3d(o[0], o[1], o[2]).normalized();
+  const Eigen::Vector3d col = Eigen::Vector3d(o[3], o[4], o[5]).normalized();
+  const Eigen::Vector3d normal = row.cross(col).normalized();
+
+  for (const FileHeader* h : slices) {
+    if (!h->position_lps_mm || !h->orientation)
+      throw InputError(ExitCode::unsupported_input, "slice lacks Image Position (Patient)", h->path,
+                       "organsmith sorts slices by position; this file cannot be placed");
+    const auto& q = *h->orientation;
+    const double dev = std::max((Eigen::Vector3d(q[0], q[1], q[2]).normalized() - row).norm(),
+                                (Eigen::Vector3d(q[3], q[4], q[5]).normalized() - col).norm());
+    if (dev > 1e-3)
+      throw InputError(ExitCode::unsupported_input, "slices of one series have different orientations",
+                       h->path, "pass --series to pick a series with a single orientation");
+    if (h->rows != first.rows || h->columns != first.columns)
+      throw InputError(ExitCode::unsupported_input, "slices of one series have different sizes", h->path);
+  }
+  auto along = [&](const FileHeader* h) { return normal.dot(*h->position_lps_mm); };
+  std::stable_sort(slices.begin(), slices.end(),
+                   [&](const FileHeader* a, const FileHeader* b) { return along(a) < along(b); });
+
+  Stack stack;
+  stack.grid.size_vox = {first.columns, first.rows, std::int64_t(slices.size())};
+  stack.grid.direction_lps.col(0) = row;
+  stack.grid.direction_lps.col(1) = col;
+  stack.grid.direction_lps.col(2) = normal;
+  stack.grid.origin_lps_mm = *slices.front()->position_lps_mm;
+  // Pixel Spacing is (spacing between rows, spacing between columns) = (dj, di).
+  stack.grid.spacing_mm.x() = (*first.pixel_spacing_mm)[1];
+  stack.grid.spacing_mm.y() = (*first.pixel_spacing_mm)[0];
+
+  if (slices.size() == 1) {
+    stack.grid.spacing_mm.z() = first.slice_thickness_mm > 0 ? first.slice_thickness_mm : 1.0;
+    stack.slices = std::move(slices);
+    stack.grid.validate();
+    return stack;
+  }
+
+  std::vector<double> steps;
+  for (std::size_t a = 1; a < slices.size(); ++a) steps.push_back(along(slices[a]) - along(slices[a - 1]));
+  for (std::size_t a = 0; a < steps.size(); ++a)
+    if (std::abs(steps[a]) < 1e-4)
+      throw InputError(ExitCode::unsupported_input,
+                       "two slices share one position (" + fmt_mm(along(slices[a])) + " along the normal)",
+                       slices[a + 1]->path,
+                       "the directory may hold two acquisitions of one series; keep one of them");
+  std::vector<double> sorted = steps;
+  std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+  const double median = sorted[sorted.size() / 2];
+
+  for (std::size_t a = 0; a < steps.size(); ++a) {
+    if (steps[a] > options.gap_factor * median) {
+      const int missing = int(std::lround(steps[a] / median)) - 1;
+      std::ostringstream m;
+      m << "missing slice" << (missing > 1 ? "s" : "") << ": " << std::max(missing, 1)
+        << " slice(s) absent between " << fmt_mm(along(slices[a])) << " ("
+        << slices[a]->path.filename().string() << ") and " << fmt_mm(along(slices[a + 1])) << " ("
+        << slices[a + 1]->path.filename().string() << ") along the slice normal; expected step "
+        << fmt_mm(median);
+      if (!corrupt.empty())
+        throw InputError(ExitCode::corrupt_file,
+                         "a corrupt file leaves the series incomplete (" + m.str() + ")",
+                         corrupt.front(), "re-export or re-transfer the corrupt file");
+      throw InputError(ExitCode::missing_slice, m.str(), input,
+                       "re-export the complete series from the PACS or scanner");
+    }
+  }
+  double worst = 0.0;
+  std::size_t worst_at = 0;
+  for (std::size_t a = 0; a < steps.size(); ++a) {
+    const double dev = std::abs(steps[a] - median) / median;
+    if (dev > worst) worst = dev, worst_at = a;
+  }
+  if (worst > options.spacing_tolerance) {
+    std::ostringstream m;
+    m << "slice spacing is not uniform: step " << fmt_mm(steps[worst_at]) << " after "
+      << slices[worst_at]->path.filename().string() << " differs from the median " << fmt_mm(median)
+      << " by " << std::lround(worst * 100) << " % (tolerance "
+      << options.spacing_tolerance * 100 << " %)";
+    throw InputError(ExitCode::nonuniform_spacing, m.str(), input,
+                     "resample the series to uniform spacing before segmenting it");
+  }
+
+  const Eigen::Vector3d span = *slices.back()->position_lps_mm - *slices.front()->position_lps_mm;
+  const double tilt_deg = std::atan2((span - normal * normal.dot(span)).norm(), normal.dot(span)) * 180.0 / M_PI;
+  if (tilt_deg > options.tilt_tolerance_deg) {
+    std::ostringstream m;
+    m.precision(2);
+    m << std::fixed << "gantry tilt: slices are stacked at " << tilt_deg
+      << "° to their normal (Gantry/Detector Tilt tag: " << first.gantry_tilt_deg << "°)";
+    throw InputError(ExitCode::gantry_tilt, m.str(), input,
+                     "resample the series onto an orthogonal grid (e.g. with a tilt-correction tool) "
+                     "before using it");
+  }
+  stack.grid.spacing_mm.z() = span.norm() / double(slices.size() - 1);
+  stack.slices = std::move(slices);
+  stack.grid.validate();
+  return stack;
+}
+
+}  // namespace
+
+bool has_dicom_magic(const fs::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  char magic[4] = {};
+  in.seekg(128);
+  in.read(magic, 4);
+  return in.gcount() == 4 && std::string(magic, 4) == "DICM";
+}
+
+IngestResult read_dicom(const fs::path& input, const IngestOptions& options, Progress& progress) {
+  const std::vector<fs::path> files = list_files(input);
+  if (files.empty())
+    throw InputError(ExitCode::no_dicom, "the directory is empty", input,
+                     "point organsmith at the folder that holds the series' .dcm files");
+
+  // Pass 1: headers.
+  gdcm::Trace::SetWarning(false);  // GDCM's own chatter; problems are reported by organsmith
+  gdcm::Trace::SetDebug(false);
+  std::vector<std::optional<FileHeader>> headers(files.size());
+  std::vector<std::string> broken(files.size());
+  std::atomic<std::size_t> done{0};
+  tbb::parallel_for(std::size_t(0), files.size(), [&](std::size_t a) {
+    // Only Part-10 files (with the "DICM" preamble) are considered; GDCM is given only files
+    // whose element lengths are consistent with their size.
+    if (has_dicom_magic(files[a]) && structurally_complete(files[a], broken[a])) headers[a] = read_header(files[a]);
+    const std::size_t d = ++done;
+    if (d % 64 == 0) progress.report(0.1 * double(d) / double(files.size()), "scanning DICOM headers");
+  });
+
+  std::vector<fs::path> corrupt;  // DICOM by their preamble but unreadable
+  std::map<std::string, std::vector<FileHeader>> series;
+  std::size_t non_dicom = 0, non_image = 0;
+  std::vector<std::string> report_early;
+  for (std::size_t a = 0; a < files.size(); ++a) {
+    if (!headers[a]) {
+      if (has_dicom_magic(files[a])) {
+        corrupt.push_back(files[a]);
+        report_early.push_back("skipped " + files[a].filename().string() + ": it " +
+                               (broken[a].empty() ? std::string("cannot be parsed") : broken[a]));
+      } else {
+        ++non_dicom;
+      }
+      continue;
+    }
+    if (!headers[a]->has_pixel_data) {
+      ++non_image;  // DICOMDIR, structured reports, presentation states …
+      continue;
+    }
+    series[headers[a]->series_uid].push_back(std::move(*headers[a]));
+  }
+  if (series.empty()) {
+    if (!corrupt.empty())
+      throw InputError(ExitCode::corrupt_file,
+                       "no readable DICOM image; " + std::to_string(corrupt.size()) +
+                           " file(s) look like DICOM but cannot be parsed",
+                       corrupt.front(), "re-export or re-transfer the series");
+    throw InputError(ExitCode::no_dicom,
+                     "no DICOM image found among " + std::to_string(files.size()) + " file(s)", input,
+                     "point organsmith at the folder that holds the series' .dcm files, or give a "
+                     "NIfTI/NRRD/MHA file");
+  }
+
+  // Choose the series.
+  const std::vector<FileHeader>* chosen = nullptr;
+  if (!options.series_uid.empty()) {
+    const auto it = series.find(options.series_uid);
+    if (it == series.end()) {
+      std::string seen;
+      for (const auto& [uid, f] : series) seen += "\n  " + uid + " (" + f.front().modality + ", " + std::to_string(f.size()) + " files)";
+      throw InputError(ExitCode::series_not_found, "no series with UID " + options.series_uid, input,
+                       "series present:" + seen);
+    }
+    chosen = &it->second;
+  } else {
+    auto score = [](const std::vector<FileHeader>& f) {
+      int frames = 0;
+      for (const auto& h : f) frames += h.frames;
+      return std::pair<int, int>(f.front().modality == "CT" ? 1 : 0, frames);
+    };
+    for (const auto& [uid, f] : series)
+      if (!chosen || score(f) > score(*chosen)) chosen = &f;
+  }
+
+  IngestResult result;
+  IngestReport& report = result.report;
+  report.series = summarize(*chosen);
+  report.warnings = report_early;
+  for (const auto& [uid, f] : series)
+    if (&f != chosen) report.other_series.push_back(summarize(f));
+  if (non_dicom > 0) report.warnings.push_back("ignored " + std::to_string(non_dicom) + " non-DICOM file(s)");
+  if (non_image > 0) report.warnings.push_back("ignored " + std::to_string(non_image) + " DICOM file(s) without an image");
+  check_modality(report.series, options, report, input);
+
+  if (chosen->size() == 1 && chosen->front().frames > 1) {
+    IngestResult mf = read_multiframe(chosen->front(), options, progress);
+    mf.report.other_series = std::move(report.other_series);
+    mf.report.warnings.insert(mf.report.warnings.begin(), report.warnings.begin(), report.warnings.end());
+    return mf;
+  }
+  check_memory(std::int64_t(chosen->front().rows) * chosen->front().columns * std::int64_t(chosen->size()),
+               options, input);
+
+  // Pass 2: geometry from the headers, then decode every slice straight into its place.
+  std::vector<const FileHeader*> slices;
+  for (const auto& h : *chosen) slices.push_back(&h);
+  Stack stack = build_stack(slices, options, corrupt, input);
+  Volume& vol = result.volume;
+  auto decode_stack = [&](const Stack& st) {
+    vol.grid = st.grid;
+    vol.hu.assign(std::size_t(vol.grid.voxel_count()), 0.0f);
+    const std::size_t per_slice = std::size_t(vol.grid.slice_voxel_count());
+    std::vector<std::string> failure(st.slices.size());
+    done = 0;
+    tbb::parallel_for(std::size_t(0), st.slices.size(), [&](std::size_t k) {
+      progress.check_cancelled();
+      decode(st.slices[k]->path, vol.hu.data() + k * per_slice, per_slice, failure[k]);
+      const std::size_t d = ++done;
+      progress.report(0.1 + 0.9 * double(d) / double(st.slices.size()), "decoding slices");
+    });
+    std::vector<const FileHeader*> good;
+    for (std::size_t k = 0; k < st.slices.size(); ++k) {
+      if (failure[k].empty()) {
+        good.push_back(st.slices[k]);
+        continue;
+      }
+      corrupt.push_back(st.slices[k]->path);
+      report.warnings.push_back("skipped " + st.slices[k]->path.filename().string() + ": it " + failure[k]);
+    }
+    return good;
+  };
+  std::vector<const FileHeader*> good = decode_stack(stack);
+  if (good.empty())
+    throw InputError(ExitCode::corrupt_file, "no slice of the series can be decoded", corrupt.front(),
+                     "re-export or re-transfer the series");
+  if (good.size() != stack.slices.size()) {
+    // Without the corrupt slices the stack must still be complete (build_stack names the
+    // corrupt file when it is not); the layout changed, so decode again.
+    stack = build_stack(good, options, corrupt, input);
+    decode_stack(stack);
+  }
+  if (!corrupt.empty())
+    report.warnings.push_back(std::to_string(corrupt.size()) +
+                              " corrupt file(s) skipped; the remaining slices form a complete series");
+  report.format = "DICOM";
+  report.series.files = int(stack.slices.size());
+  progress.report(1.0, "decoding slices");
+  return result;
+}
+
+}  // namespace organsmith

@@ -1,0 +1,94 @@
+#include "pipeline/image_io.h"
+
+#include "core/errors.h"
+#include "pipeline/itk_image_io.h"
+
+#include <algorithm>
+#include <cmath>
+
+namespace organsmith {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string lower_name(const fs::path& p) {
+  std::string s = p.filename().string();
+  std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+  return s;
+}
+
+bool ends_with(const std::string& s, const std::string& suffix) {
+  return s.size() >= suffix.size() && s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+itk_io::PlainGrid plain(const ImageGrid& g) {
+  itk_io::PlainGrid p;
+  for (int a = 0; a < 3; ++a) {
+    p.size[a] = g.size_vox[a];
+    p.spacing[a] = g.spacing_mm[a];
+    p.origin[a] = g.origin_lps_mm[a];
+    for (int b = 0; b < 3; ++b) p.direction[3 * a + b] = g.direction_lps(a, b);
+  }
+  return p;
+}
+
+ImageGrid grid(const itk_io::PlainGrid& p) {
+  ImageGrid g;
+  for (int a = 0; a < 3; ++a) {
+    g.size_vox[a] = p.size[a];
+    g.spacing_mm[a] = p.spacing[a];
+    g.origin_lps_mm[a] = p.origin[a];
+    for (int b = 0; b < 3; ++b) g.direction_lps(a, b) = p.direction[3 * a + b];
+  }
+  return g;
+}
+
+}  // namespace
+
+bool is_volume_file_name(const fs::path& path) { return !volume_file_format(path).empty(); }
+
+std::string volume_file_format(const fs::path& path) {
+  const std::string n = lower_name(path);
+  if (ends_with(n, ".nii") || ends_with(n, ".nii.gz")) return "NIfTI";
+  if (ends_with(n, ".nrrd") || ends_with(n, ".nhdr")) return "NRRD";
+  if (ends_with(n, ".mha") || ends_with(n, ".mhd")) return "MetaImage";
+  return {};
+}
+
+Volume read_volume_file(const fs::path& path) {
+  itk_io::PlainGrid p;
+  Volume v;
+  itk_io::read_float(path.string(), p, v.hu);
+  v.grid = grid(p);
+  v.grid.validate();
+  return v;
+}
+
+LabelMap read_label_map(const fs::path& path) {
+  itk_io::PlainGrid p;
+  std::vector<float> values;
+  itk_io::read_float(path.string(), p, values);
+  LabelMap m;
+  m.grid = grid(p);
+  m.labels.resize(values.size());
+  for (std::size_t a = 0; a < values.size(); ++a) {
+    const float v = std::nearbyint(values[a]);
+    if (v < 0.0f || v > 255.0f)
+      throw InputError(ExitCode::unsupported_input,
+                       "label value " + std::to_string(values[a]) + " is outside 0–255", path,
+                       "give a label map with small non-negative integer labels");
+    m.labels[a] = std::uint8_t(v);
+  }
+  return m;
+}
+
+void write_volume_file(const Volume& volume, const fs::path& path) {
+  itk_io::write_float(path.string(), plain(volume.grid), volume.hu.data());
+}
+
+void write_label_map(const LabelMap& labels, const fs::path& path) {
+  itk_io::write_uint8(path.string(), plain(labels.grid), labels.labels.data());
+}
+
+}  // namespace organsmith

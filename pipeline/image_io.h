@@ -1,0 +1,29 @@
+#pragma once
+// Volumetric image files other than DICOM: NIfTI (.nii, .nii.gz), NRRD (.nrrd, .nhdr) and
+// MetaImage (.mha, .mhd). ITK stays inside image_io.cpp.
+
+#include "core/volume.h"
+
+#include <filesystem>
+#include <string>
+
+namespace organsmith {
+
+/// True when the file name has an extension read by `read_volume_file`.
+bool is_volume_file_name(const std::filesystem::path& path);
+/// Human-readable format name for a volume file name ("NIfTI", "NRRD", "MetaImage").
+std::string volume_file_format(const std::filesystem::path& path);
+
+/// Reads a scalar volume (values taken as HU; NIfTI scl_slope/inter applied). Geometry is
+/// converted to LPS. Throws InputError when the file cannot be read.
+Volume read_volume_file(const std::filesystem::path& path);
+/// Reads a label map (values cast to uint8; throws when a value is outside 0–255).
+LabelMap read_label_map(const std::filesystem::path& path);
+
+/// Writes a volume as float (format from the extension). Not atomic: callers write into a
+/// staging directory (see pipeline/runner.h).
+void write_volume_file(const Volume& volume, const std::filesystem::path& path);
+/// Writes a label map as uint8 (format from the extension; .nii.gz for stage outputs).
+void write_label_map(const LabelMap& labels, const std::filesystem::path& path);
+
+}  // namespace organsmith

@@ -1,0 +1,50 @@
+#include "pipeline/ingest.h"
+
+#include "core/errors.h"
+#include "core/sha256.h"
+#include "pipeline/dicom.h"
+#include "pipeline/image_io.h"
+
+#include <algorithm>
+
+namespace organsmith {
+
+namespace fs = std::filesystem;
+
+IngestResult ingest(const fs::path& input, const IngestOptions& options, Progress& progress) {
+  std::error_code ec;
+  if (!fs::exists(input, ec))
+    throw InputError(ExitCode::input_not_found, "input does not exist", input,
+                     "give a DICOM directory, a DICOM file, or a NIfTI/NRRD/MHA file");
+  IngestResult result;
+  if (fs::is_regular_file(input) && is_volume_file_name(input)) {
+    progress.report(0.0, "reading volume");
+    result.volume = read_volume_file(input);
+    result.report.format = volume_file_format(input);
+    progress.report(1.0, "reading volume");
+  } else {
+    if (fs::is_regular_file(input) && !has_dicom_magic(input))
+      throw InputError(ExitCode::unsupported_input, "file is neither DICOM nor a known volume format",
+                       input, "give a DICOM directory or file, or a .nii/.nii.gz/.nrrd/.nhdr/.mha/.mhd file");
+    result = read_dicom(input, options, progress);
+  }
+  if (!result.volume.hu.empty()) {
+    const auto [lo, hi] = std::minmax_element(result.volume.hu.begin(), result.volume.hu.end());
+    result.report.hu_min = *lo;
+    result.report.hu_max = *hi;
+  }
+  return result;
+}
+
+std::string volume_digest(const Volume& volume) {
+  Sha256 s;
+  const ImageGrid& g = volume.grid;
+  s.update(g.size_vox.data(), sizeof(g.size_vox));
+  s.update(g.spacing_mm.data(), 3 * sizeof(double));
+  s.update(g.origin_lps_mm.data(), 3 * sizeof(double));
+  s.update(g.direction_lps.data(), 9 * sizeof(double));
+  s.update(volume.hu.data(), volume.hu.size() * sizeof(float));
+  return s.hex_digest();
+}
+
+}  // namespace organsmith

@@ -1,0 +1,347 @@
+#include "pipeline/runner.h"
+
+#include "core/errors.h"
+#include "core/sha256.h"
+#include "organsmith_version.h"  // generated at build time: version and git commit
+#include "pipeline/ingest.h"
+#include "pipeline/phantom.h"
+#include "pipeline/phantom_files.h"
+
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <fstream>
+#include <functional>
+#include <random>
+#include <sstream>
+
+namespace organsmith {
+
+namespace fs = std::filesystem;
+
+std::string tool_version() { return ORGANSMITH_VERSION_STRING; }
+std::string tool_git_commit() { return ORGANSMITH_GIT_COMMIT; }
+
+namespace {
+
+/// Resets the kernel's resident-set high-water mark so that it measures one stage.
+/// Returns false where the kernel does not allow it (the figure is then the process peak).
+bool reset_peak_rss() {
+  std::ofstream f("/proc/self/clear_refs");
+  f << "5";
+  return bool(f);
+}
+
+double peak_rss_mib() {
+  std::ifstream f("/proc/self/status");
+  std::string line;
+  while (std::getline(f, line))
+    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
+  return 0.0;
+}
+
+nlohmann::json list_outputs(const fs::path& root, const fs::path& out_dir) {
+  std::vector<fs::path> files;
+  for (const auto& e : fs::recursive_directory_iterator(root))
+    if (e.is_regular_file()) files.push_back(e.path());
+  std::sort(files.begin(), files.end());
+  nlohmann::json outs = nlohmann::json::array();
+  for (const auto& f : files)
+    outs.push_back({{"path", fs::relative(f, out_dir).generic_string()},
+                    {"bytes", fs::file_size(f)},
+                    {"sha256", sha256_file(f)}});
+  return outs;
+}
+
+/// True when every output a previous run recorded is still there, unchanged.
+bool outputs_intact(const nlohmann::json& outputs, const fs::path& out_dir) {
+  if (!outputs.is_array() || outputs.empty()) return false;
+  for (const auto& o : outputs) {
+    const fs::path p = out_dir / o.value("path", "");
+    std::error_code ec;
+    if (!fs::is_regular_file(p, ec) || fs::file_size(p, ec) != o.value("bytes", std::uint64_t(0))) return false;
+    if (sha256_file(p) != o.value("sha256", "")) return false;
+  }
+  return true;
+}
+
+/// A cheap fingerprint of an input on disk: relative path, size and modification time of every
+/// file (hashing the pixels would cost as much as reading them).
+std::string input_stat_digest(const fs::path& input) {
+  Sha256 s;
+  auto add = [&](const fs::path& f, const fs::path& rel) {
+    std::error_code ec;
+    const auto size = fs::file_size(f, ec);
+    const auto mtime = fs::last_write_time(f, ec).time_since_epoch().count();
+    std::ostringstream line;
+    line << rel.generic_string() << '\t' << size << '\t' << mtime << '\n';
+    s.update(line.str());
+  };
+  if (fs::is_directory(input)) {
+    std::vector<fs::path> files;
+    for (const auto& e : fs::recursive_directory_iterator(input))
+      if (e.is_regular_file()) files.push_back(e.path());
+    std::sort(files.begin(), files.end());
+    for (const auto& f : files) add(f, fs::relative(f, input));
+  } else {
+    add(input, input.filename());
+  }
+  return s.hex_digest();
+}
+
+nlohmann::json grid_json(const ImageGrid& g) {
+  nlohmann::json dir = nlohmann::json::array();
+  for (int c = 0; c < 3; ++c) dir.push_back({g.direction_lps(0, c), g.direction_lps(1, c), g.direction_lps(2, c)});
+  return {{"size_vox", g.size_vox},
+          {"spacing_mm", {g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z()}},
+          {"origin_lps_mm", {g.origin_lps_mm.x(), g.origin_lps_mm.y(), g.origin_lps_mm.z()}},
+          {"direction_lps_columns", dir}};
+}
+
+struct Stage {
+  std::string name;
+  std::string fingerprint;
+  /// Writes the stage's files into the staging directory given.
+  std::function<void(const fs::path& staging)> run;
+};
+
+class Runner {
+ public:
+  Runner(const CaseFile& c, const RunOptions& options, Progress& progress)
+      : case_(c), options_(options), progress_(progress), out_(fs::absolute(c.out_dir)) {
+    std::ifstream in(out_ / "manifest.json");
+    if (in) {
+      try {
+        previous_ = nlohmann::json::parse(in);
+      } catch (const nlohmann::json::exception&) {
+        spdlog::warn("ignoring the unreadable previous manifest in {}", out_.string());
+      }
+    }
+  }
+
+  RunSummary run() {
+    const bool existed = fs::exists(out_);
+    try {
+      run_stages();
+    } catch (...) {
+      // A run that wrote nothing leaves no empty output directory behind either.
+      std::error_code ec;
+      if (!existed && fs::is_directory(out_, ec) && fs::is_empty(out_, ec)) fs::remove(out_, ec);
+      throw;
+    }
+    RunSummary summary;
+    summary.out_dir = out_;
+    summary.stages = records_;
+    summary.manifest = manifest();
+    write_text_atomic(out_ / "manifest.json", summary.manifest.dump(2) + "\n");
+    return summary;
+  }
+
+ private:
+  void run_stages() {
+    fs::path input = case_.input;
+    if (case_.synthesize_phantom) {
+      const nlohmann::json opts = to_json(case_)["phantom"];
+      execute({"phantom", fingerprint("phantom", opts.dump()), [&](const fs::path& staging) {
+                 const Phantom ph = synthesize_phantom(case_.phantom, progress_);
+                 fs::create_directories(staging / "phantom");
+                 write_phantom_files(ph, case_.phantom, staging / "phantom", progress_);
+               }});
+      input = out_ / "phantom" / "dicom";
+    }
+    const nlohmann::json ingest_opts = to_json(case_)["ingest"];
+    const std::string organs = to_json(case_)["organs"].dump();
+    execute({"ingest", fingerprint("ingest", ingest_opts.dump() + organs + input_stat_digest(input)),
+             [&, input](const fs::path& staging) { write_ingest(input, staging); }});
+  }
+
+  /// Ingest writes ingest.json: what was read, its geometry and digest, and the organ seeds
+  /// resolved to LPS mm.
+  void write_ingest(const fs::path& input, const fs::path& staging) {
+    IngestResult r = ingest(input, case_.ingest, progress_);
+    for (const auto& w : r.report.warnings) spdlog::warn("ingest: {}", w);
+    input_digest_ = volume_digest(r.volume);
+    nlohmann::json j;
+    j["format"] = r.report.format;
+    j["digest_sha256"] = input_digest_;
+    j["grid"] = grid_json(r.volume.grid);
+    j["hu_range"] = {r.report.hu_min, r.report.hu_max};
+    if (r.report.format.rfind("DICOM", 0) == 0) {
+      j["series"] = {{"series_uid", r.report.series.series_uid},
+                     {"modality", r.report.series.modality},
+                     {"slices", r.report.series.files},
+                     {"transfer_syntax", r.report.series.transfer_syntax}};
+      j["other_series"] = nlohmann::json::array();
+      for (const auto& s : r.report.other_series)
+        j["other_series"].push_back({{"series_uid", s.series_uid}, {"modality", s.modality}, {"files", s.files}});
+    }
+    j["warnings"] = r.report.warnings;
+    j["organs"] = resolve_seeds(r.volume.grid);
+    input_json_ = {{"format", j["format"]}, {"digest_sha256", input_digest_}, {"grid", j["grid"]}};
+    write_text_atomic(staging / "ingest.json", j.dump(2) + "\n");
+  }
+
+  nlohmann::json resolve_seeds(const ImageGrid& grid) {
+    std::map<std::string, Eigen::Vector3d> phantom_seeds;
+    if (case_.synthesize_phantom) phantom_seeds = read_seeds(out_ / "phantom" / "seeds.json");
+    nlohmann::json organs = nlohmann::json::array();
+    for (const auto& o : case_.organs) {
+      nlohmann::json oj = {{"name", o.name}};
+      std::optional<Eigen::Vector3d> p;
+      std::string source;
+      if (o.seed_lps_mm) p = o.seed_lps_mm, source = "case file (LPS mm)";
+      else if (o.seed_ijk) p = grid.index_to_lps_mm(*o.seed_ijk), source = "case file (voxel ijk)";
+      else if (phantom_seeds.count(o.name)) p = phantom_seeds[o.name], source = "phantom seeds.json";
+      else source = o.name == "trachea" ? "automatic" : "none";
+      if (p) {
+        const Eigen::Vector3d ijk = grid.lps_mm_to_index(*p);
+        if (!grid.contains(std::lround(ijk.x()), std::lround(ijk.y()), std::lround(ijk.z())))
+          throw CaseFileError("the seed of organ '" + o.name + "' lies outside the image", case_.source,
+                              "check the seed: LPS mm as shown by `organsmith info`");
+        oj["seed_lps_mm"] = {p->x(), p->y(), p->z()};
+        oj["seed_ijk"] = {ijk.x(), ijk.y(), ijk.z()};
+      }
+      oj["seed_source"] = source;
+      organs.push_back(oj);
+    }
+    return organs;
+  }
+
+  std::string fingerprint(const std::string& stage, const std::string& inputs) const {
+    return sha256_hex(tool_version() + "\n" + stage + "\n" + inputs);
+  }
+
+  const nlohmann::json* previous_stage(const std::string& name) const {
+    if (!previous_.contains("stages")) return nullptr;
+    for (const auto& s : previous_["stages"])
+      if (s.value("name", "") == name) return &s;
+    return nullptr;
+  }
+
+  void execute(const Stage& stage) {
+    progress_.check_cancelled();
+    StageRecord rec;
+    rec.name = stage.name;
+    rec.fingerprint = stage.fingerprint;
+    const nlohmann::json* prev = previous_stage(stage.name);
+    if (!options_.force && prev && prev->value("fingerprint", "") == stage.fingerprint &&
+        outputs_intact(prev->value("outputs", nlohmann::json()), out_)) {
+      rec.skipped = true;
+      rec.outputs = (*prev)["outputs"];
+      rec.seconds = prev->value("seconds", 0.0);
+      rec.peak_rss_mib = prev->value("peak_rss_mib", 0.0);
+      if (stage.name == "ingest" && previous_.contains("input")) input_json_ = previous_["input"];
+      spdlog::info("stage {}: unchanged since the last run, skipped (--force to redo)", stage.name);
+      records_.push_back(rec);
+      return;
+    }
+    spdlog::info("stage {}: running", stage.name);
+    const bool per_stage_peak = reset_peak_rss();
+    const auto t0 = std::chrono::steady_clock::now();
+    fs::create_directories(out_);
+    const fs::path staging = make_staging_dir(out_ / ("." + stage.name));
+    try {
+      stage.run(staging);
+      rec.outputs = list_outputs(staging, staging);
+      // Move each top-level entry into place.
+      for (const auto& e : fs::directory_iterator(staging)) {
+        const fs::path dest = out_ / e.path().filename();
+        if (e.is_directory()) commit_directory(e.path(), dest);
+        else fs::rename(e.path(), dest);
+      }
+      fs::remove_all(staging);
+    } catch (...) {
+      std::error_code ec;
+      fs::remove_all(staging, ec);
+      throw;
+    }
+    rec.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    rec.peak_rss_mib = peak_rss_mib();
+    if (!per_stage_peak) spdlog::debug("peak memory is the process peak (cannot reset VmHWM)");
+    spdlog::info("stage {}: done in {:.2f} s, peak {:.0f} MiB, {} file(s)", stage.name, rec.seconds,
+                 rec.peak_rss_mib, rec.outputs.size());
+    records_.push_back(rec);
+  }
+
+  nlohmann::json manifest() const {
+    nlohmann::json m;
+    m["tool"] = {{"name", "organsmith"}, {"version", tool_version()}, {"git_commit", tool_git_commit()}};
+    m["case"] = to_json(case_);
+    m["input"] = input_json_;
+    m["coordinates"] = "LPS millimetres (DICOM patient coordinates)";
+    m["stages"] = nlohmann::json::array();
+    for (const auto& r : records_)
+      m["stages"].push_back({{"name", r.name},
+                             {"fingerprint", r.fingerprint},
+                             {"status", r.skipped ? "skipped (unchanged)" : "ran"},
+                             {"seconds", r.seconds},
+                             {"peak_rss_mib", r.peak_rss_mib},
+                             {"outputs", r.outputs}});
+    return m;
+  }
+
+  const CaseFile& case_;
+  RunOptions options_;
+  Progress& progress_;
+  fs::path out_;
+  nlohmann::json previous_;
+  std::vector<StageRecord> records_;
+  std::string input_digest_;
+  nlohmann::json input_json_ = nlohmann::json::object();
+};
+
+}  // namespace
+
+fs::path make_staging_dir(const fs::path& final_path) {
+  std::random_device rd;
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    std::ostringstream name;
+    name << final_path.filename().string() << ".staging-" << std::hex << rd();
+    const fs::path p = final_path.parent_path() / name.str();
+    std::error_code ec;
+    if (fs::create_directories(p, ec)) return p;
+    if (ec) throw OutputError("cannot create a staging directory: " + ec.message(), p,
+                              "check that the output directory is writable");
+  }
+  throw OutputError("cannot create a unique staging directory", final_path);
+}
+
+void commit_directory(const fs::path& staging_dir, const fs::path& final_dir) {
+  std::error_code ec;
+  fs::path old;
+  if (fs::exists(final_dir, ec)) {
+    old = make_staging_dir(final_dir);
+    fs::remove(old);
+    fs::rename(final_dir, old, ec);
+    if (ec) throw OutputError("cannot move the previous output aside: " + ec.message(), final_dir);
+  }
+  fs::rename(staging_dir, final_dir, ec);
+  if (ec) {
+    if (!old.empty()) fs::rename(old, final_dir);
+    throw OutputError("cannot move the new output into place: " + ec.message(), final_dir);
+  }
+  if (!old.empty()) fs::remove_all(old, ec);
+}
+
+void write_text_atomic(const fs::path& path, const std::string& text) {
+  const fs::path tmp = path.parent_path() / ("." + path.filename().string() + ".tmp");
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    out << text;
+    out.flush();
+    if (!out) {
+      std::error_code ec;
+      fs::remove(tmp, ec);
+      throw OutputError("cannot write the file", path, "check that the directory is writable and the disk not full");
+    }
+  }
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) throw OutputError("cannot move the file into place: " + ec.message(), path);
+}
+
+RunSummary run_case(const CaseFile& c, const RunOptions& options, Progress& progress) {
+  return Runner(c, options, progress).run();
+}
+
+}  // namespace organsmith

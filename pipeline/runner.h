@@ -1,0 +1,55 @@
+#pragma once
+// The stage runner: runs a case's stages in order into an output directory, skips stages whose
+// inputs and options did not change, commits each stage's files atomically, and records
+// everything in <out>/manifest.json.
+
+#include "core/progress.h"
+#include "pipeline/case_file.h"
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace organsmith {
+
+struct RunOptions {
+  bool force = false;  ///< rerun every stage even when its fingerprint is unchanged
+};
+
+/// What happened to one stage.
+struct StageRecord {
+  std::string name;
+  std::string fingerprint;     ///< SHA-256 of the stage's options and input digests
+  bool skipped = false;        ///< true when reused from a previous run
+  double seconds = 0.0;
+  double peak_rss_mib = 0.0;   ///< resident-set high-water mark during the stage
+  nlohmann::json outputs = nlohmann::json::array();  ///< [{path, bytes, sha256}], paths relative to out
+};
+
+struct RunSummary {
+  std::filesystem::path out_dir;
+  std::vector<StageRecord> stages;
+  nlohmann::json manifest;
+};
+
+/// Runs `c` into c.out_dir. Throws organsmith::Error on failure; files of the failing stage are
+/// never left behind (each stage writes into a staging directory that is renamed into place).
+RunSummary run_case(const CaseFile& c, const RunOptions& options, Progress& progress);
+
+/// Replaces `final_dir` by `staging_dir` (renames; the old directory is removed only after the
+/// new one is in place).
+void commit_directory(const std::filesystem::path& staging_dir, const std::filesystem::path& final_dir);
+
+/// A fresh staging directory next to `final_path` (same file system, so renames are atomic).
+std::filesystem::path make_staging_dir(const std::filesystem::path& final_path);
+
+/// Writes `text` to `path` atomically (temporary file in the same directory, then rename).
+void write_text_atomic(const std::filesystem::path& path, const std::string& text);
+
+/// organsmith's version and the git commit it was built from.
+std::string tool_version();
+std::string tool_git_commit();
+
+}  // namespace organsmith

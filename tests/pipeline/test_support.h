@@ -1,0 +1,45 @@
+#pragma once
+// Helpers shared by the pipeline tests: where the real cases are, scratch directories, and
+// running the organsmith CLI as a user would.
+
+#include <filesystem>
+#include <string>
+
+namespace organsmith::testing {
+
+/// ../shared/data/real beside the project, or empty when absent (tests then skip).
+std::filesystem::path real_data_dir();
+
+/// A fresh, empty directory under the system temp dir, removed when the object dies.
+class ScratchDir {
+ public:
+  explicit ScratchDir(const std::string& tag);
+  ~ScratchDir();
+  const std::filesystem::path& path() const { return path_; }
+  std::filesystem::path operator/(const std::string& p) const { return path_ / p; }
+
+ private:
+  std::filesystem::path path_;
+};
+
+struct CliResult {
+  int exit_code = -1;
+  std::string output;  ///< stdout and stderr together
+};
+
+/// Runs the organsmith executable with `args` (shell-quoted by the caller where needed).
+CliResult run_cli(const std::string& args);
+
+/// Every file under `dir` (recursively), as paths relative to it.
+std::size_t count_files(const std::filesystem::path& dir);
+
+/// True when `needle` occurs in any file under `dir`.
+bool any_file_contains(const std::filesystem::path& dir, const std::string& needle);
+
+}  // namespace organsmith::testing
+
+#define ORGANSMITH_REQUIRE_REAL_DATA()                                                        \
+  do {                                                                                        \
+    if (organsmith::testing::real_data_dir().empty())                                         \
+      GTEST_SKIP() << "../shared/data/real is absent: the real-CT checks need it (CI has it)"; \
+  } while (0)
