@@ -2,6 +2,7 @@
 
 #include "core/errors.h"
 #include "pipeline/case_file.h"
+#include "pipeline/commands.h"
 #include "pipeline/ingest.h"
 #include "pipeline/phantom.h"
 #include "pipeline/phantom_files.h"
@@ -219,6 +220,8 @@ int main(int argc, char** argv) {
   run->add_flag("--print-default-case", print_default, "print the embedded default case and exit");
   run_flags.add_to(run);
 
+  std::vector<Command> commands = physics_commands(app);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -241,6 +244,8 @@ int main(int argc, char** argv) {
       }
       return cmd_run(case_path, run_out, force, run_flags);
     }
+    for (const auto& c : commands)
+      if (c.sub->parsed()) return c.run();
   } catch (const Error& e) {
     spdlog::error("{}", e.what());
     return int(e.code());

@@ -205,9 +205,10 @@ struct Anatomy {
 
   // Lungs and diaphragm.
   double apex_d = 70.0;
-  double apex_dome_mm = 55.0;  // the apex is the top of an ellipsoidal cap this tall
-  V3 dome_right{-65.0, 5.0, 268.0};
-  V3 dome_left{65.0, 5.0, 283.0};
+  double apex_dome_mm = 75.0;  // the apex is the top of an ellipsoidal cap this tall
+  V3 dome_right{-65.0, -5.0, 268.0};
+  V3 dome_left{65.0, -5.0, 283.0};
+  V3 central_tendon{15.0, -35.0, 290.0};  // under the heart
   double diaphragm_mm = 5.0;
 
   // Mediastinum and vessels.
@@ -218,7 +219,7 @@ struct Anatomy {
   std::array<Ellipsoid, 2> thyroid{};
 
   // Abdomen.
-  V3 gb_neck{-30.0, -15.0, 320.0};
+  V3 gb_neck{-20.0, -15.0, 320.0};
   V3 gb_axis{};  // unit vector from the neck toward the fundus
   V3 gb_bed{};   // unit vector perpendicular to the axis, toward the liver
   double gb_length = 80.0;  // tip to tip
@@ -303,7 +304,7 @@ Anatomy make_anatomy(std::uint64_t seed) {
   for (int i = 0; i < 12; ++i) {
     Rib& r = a.ribs[std::size_t(i)];
     r.d_posterior = 95.0 + 23.0 * i;
-    r.drop_mm = i == 0 ? 20.0 : (i >= 10 ? 25.0 : 55.0);
+    r.drop_mm = i == 0 ? 35.0 : (i >= 10 ? 40.0 : 80.0);
     r.theta_bone = i == 0 ? 2.7 : (i < 7 ? 2.55 : (i < 10 ? 2.35 : (i == 10 ? 1.9 : 1.5)));
     r.cartilage = i < 10;
   }
@@ -358,6 +359,15 @@ struct SliceContext {
 
 /// Every bounding test of a per-slice ellipsoid must admit this margin (q units).
 constexpr double kEllipsoidMarginQ = 1.35;
+/// Semi-axes of the visceral compartment of the neck, mm.
+constexpr Layer kNeckCavity{38.0, 32.0};
+
+/// 0 above the lung apices, rising like an ellipsoidal dome to 1 where the chest is full.
+double dome_profile(const Anatomy& a, double d) {
+  if (d <= a.apex_d) return 0.0;
+  const double below_top = std::min(1.0, (d - a.apex_d) / a.apex_dome_mm);
+  return std::sqrt(1.0 - sq(1.0 - below_top));
+}
 
 SliceContext make_slice(const Anatomy& a, double d) {
   SliceContext s;
@@ -372,15 +382,21 @@ SliceContext make_slice(const Anatomy& a, double d) {
   const double fat = std::min(lerp(7.0, 13.0, t) + 0.05 * abdomen, 24.0);
   const double muscle = lerp(14.0, 16.0, t) - 4.0 * smoothstep(280.0, 340.0, d);
   const auto inset = [&](double mm) { return Layer{body_a - mm, body_b - mm}; };
-  const double cavity_inset = skin + fat + muscle;
   s.layers[kBody] = inset(0.0);
   s.layers[kSkinInner] = inset(skin);
   s.layers[kFatInner] = inset(skin + fat);
-  s.layers[kCavity] = inset(cavity_inset);
+  // The rib cage is a dome at the thoracic inlet: above the lung apices the trunk holds only
+  // the neck viscera, and the shoulder muscles fill the space beside the upper ribs.
+  const Layer full = inset(skin + fat + muscle);
+  const double inlet = dome_profile(a, d);
+  const Layer cavity{std::min(full.a, std::max(kNeckCavity.a, full.a * inlet)),
+                     std::min(full.b, std::max(kNeckCavity.b, full.b * inlet))};
+  const auto around_cavity = [&](double mm) { return Layer{cavity.a + mm, cavity.b + mm}; };
+  s.layers[kCavity] = cavity;
   // Ribs lie in the inner part of the chest wall, just outside the pleura.
-  s.layers[kRingInner] = inset(cavity_inset - 1.5);
-  s.layers[kRingOuter] = inset(cavity_inset - 10.5);
-  s.ring = inset(cavity_inset - 6.0);
+  s.layers[kRingInner] = around_cavity(1.5);
+  s.layers[kRingOuter] = around_cavity(10.5);
+  s.ring = around_cavity(6.0);
 
   // Spine: cervical → thoracic → lumbar sizes, thoracic kyphosis sets it back in the chest.
   const double lumbar = smoothstep(300.0, 420.0, d);
@@ -390,7 +406,7 @@ SliceContext make_slice(const Anatomy& a, double d) {
   s.arch_mm = lerp(4.0, 5.0, t);
   s.canal_y = s.vb_y + s.vb_r + 0.8 * s.canal_r;
   s.spinous_mm = lerp(14.0, 22.0, t);
-  s.transverse_mm = lerp(14.0, 22.0, t);
+  s.transverse_mm = lerp(8.0, 22.0, t);
   const double phase = std::fmod(d + 1000.0 * a.vertebra_period, a.vertebra_period);
   s.vertebral_body = phase < a.vertebra_period - a.disc_mm;
   s.posterior_elements = phase > 2.0 && phase < a.vertebra_period - 1.0;
@@ -469,7 +485,8 @@ class Model {
   std::optional<Tissue> spine(const SliceContext& s, double x, double y) const;
   std::optional<Tissue> airway(const SliceContext& s, const RowContext& r, double x) const;
   std::optional<Tissue> chest_wall(const SliceContext& s, double x, double y) const;
-  Tissue thorax(const SliceContext& s, const RowContext& r, double x) const;
+  /// `aorta_mm`: distance outside the aortic wall (the aorta itself is handled by the caller).
+  Tissue thorax(const SliceContext& s, const RowContext& r, double x, double aorta_mm) const;
   Tissue abdomen(const SliceContext& s, const RowContext& r, double x) const;
   bool lung_region(const SliceContext& s, const RowContext& r, double x) const;
   double aorta_excess(const SliceContext& s, V3 p) const;
@@ -484,15 +501,20 @@ class Model {
 
 double Model::diaphragm_d(double x, double y) const {
   // Two paraboloid domes; the lower envelope of the lungs is the higher (smaller d) of them.
+  // The recesses reach far lower behind (posterior costophrenic recess) than in front.
   const auto dome = [&](const V3& c) {
-    return c.d + 55.0 * (sq((x - c.x) / 85.0) + sq((y - c.y) / 80.0));
+    const double dy = y - c.y;
+    return c.d + 55.0 * sq((x - c.x) / 85.0) + (dy < 0.0 ? 25.0 : 55.0) * sq(dy / 80.0);
   };
-  return std::min(dome(a_.dome_right), dome(a_.dome_left));
+  const double tendon = a_.central_tendon.d + 60.0 * (sq((x - a_.central_tendon.x) / 60.0) +
+                                                      sq((y - a_.central_tendon.y) / 50.0));
+  return std::min({dome(a_.dome_right), dome(a_.dome_left), tendon});
 }
 
 bool Model::paraspinal(const SliceContext& s, double x, double y) const {
-  // The erector spinae fill the gutter behind the transverse processes.
-  return std::abs(x) < 42.0 && y > s.canal_y - 6.0;
+  // The erector spinae fill the gutter behind the transverse processes; the lungs curve
+  // around them.
+  return sq(x / 46.0) + sq((y - s.canal_y - 22.0) / 30.0) < 1.0 || (std::abs(x) < 30.0 && y > s.canal_y);
 }
 
 double Model::aorta_excess(const SliceContext& s, V3 p) const {
@@ -557,7 +579,7 @@ std::optional<Tissue> Model::chest_wall(const SliceContext& s, double x, double 
   }
   constexpr double theta0 = 0.28;  // the rib leaves the transverse process here
   if (theta < theta0) return std::nullopt;
-  const double along = std::pow((theta - theta0) / (kPi - theta0), 1.3);
+  const double along = std::pow((theta - theta0) / (kPi - theta0), 1.1);
   for (const Rib& rib : a_.ribs) {
     const double dd = s.d - (rib.d_posterior + rib.drop_mm * along);
     if (std::abs(dd) > 6.0) continue;
@@ -576,8 +598,8 @@ bool Model::lung_region(const SliceContext& s, const RowContext& r, double x) co
   if (s.d >= diaphragm_d(x, y)) return false;
   if (s.apex_q > 0.0) {
     // Each apex is a cap of an ellipsoid centred over the lung's upper lobe.
-    const double cx = x < 0.0 ? -52.0 : 52.0;
-    if (sq((x - cx) / 58.0) + sq((y - 22.0) / 55.0) + s.apex_q > 1.0) return false;
+    const double cx = x < 0.0 ? -50.0 : 50.0;
+    if (sq((x - cx) / 62.0) + sq((y - 5.0) / 100.0) + s.apex_q > 1.0) return false;
   }
   // The mediastinum is widest around the trachea and great vessels, narrow behind the
   // sternum where the lungs almost meet.
@@ -589,9 +611,9 @@ bool Model::lung_region(const SliceContext& s, const RowContext& r, double x) co
   return true;
 }
 
-Tissue Model::thorax(const SliceContext& s, const RowContext& r, double x) const {
+Tissue Model::thorax(const SliceContext& s, const RowContext& r, double x, double aorta_mm) const {
   const double y = r.y;
-  if (s.heart_q < 1.0) {
+  if (s.heart_q < kEllipsoidMarginQ) {
     const double q = a_.heart.q_plane(x, y) + s.heart_q;
     if (q < 1.0) return body(hu::blood);
     if (q < 1.25) return body(hu::fat);  // epicardial fat
@@ -603,6 +625,7 @@ Tissue Model::thorax(const SliceContext& s, const RowContext& r, double x) const
         return body(hu::thyroid);
     return body(hu::soft_tissue);
   }
+  if (aorta_mm < 3.0) return body(hu::fat);  // the aorta runs in mediastinal fat
   if (lung_region(s, r, x)) return Tissue{hu::lung, Label::lungs};
   return body(hu::fat);  // mediastinal fat
 }
@@ -620,12 +643,13 @@ std::optional<int> Model::gallbladder(V3 p) const {
   // touches fat, as in a real fossa that opens onto the visceral surface.
   const double side = dot(off, a_.gb_bed) / dist;
   if (side > -0.2) return dist < radius + 10.0 ? std::optional<int>(0) : std::nullopt;
-  return dist < radius + 25.0 ? std::optional<int>(-1) : std::nullopt;
+  return dist < radius + 12.0 ? std::optional<int>(-1) : std::nullopt;
 }
 
 bool Model::liver(const SliceContext& s, double x, double y) const {
   // Medial edge: the left lobe reaches across the midline anteriorly and recedes lower down.
-  const double x_limit = -15.0 - 0.7 * (y - 40.0) - 0.9 * std::max(0.0, s.d - 295.0);
+  const double x_anterior = 70.0 - 1.3 * std::max(0.0, s.d - 290.0);
+  const double x_limit = lerp(-22.0, x_anterior, smoothstep(50.0, -90.0, y));
   // Visceral surface: lowest at the right lateral edge and posteriorly.
   const double d_inferior = 385.0 - 0.3 * (x + 60.0) + 0.15 * y;
   if (x > x_limit || s.d > d_inferior) return false;
@@ -666,13 +690,11 @@ Tissue Model::abdomen(const SliceContext& s, const RowContext& r, double x) cons
     const double px = std::abs(x) - (s.vb_r + 0.6 * s.psoas_r + 4.0);
     if (sq(px / s.psoas_r) + sq((y - s.vb_y - 2.0) / (1.2 * s.psoas_r)) < 1.0) return body(hu::muscle);
   }
-  // Bowel loops in the left and lower abdomen; fat next to the gallbladder keeps its free
-  // wall visible, as it usually is.
-  if (x > 0.0 || s.d > 400.0) {
-    const double loops = std::sin(0.11 * x + 1.3 * std::sin(0.05 * s.d)) * std::sin(0.1 * y + 0.04 * x);
-    if (loops > 0.15) return body(hu::bowel);
-  }
-  return body(hu::fat);
+  // Bowel loops in the left and lower abdomen. They fade out toward the gallbladder, whose
+  // free wall usually faces fat; raising the threshold smoothly avoids a seam.
+  const double sparse = smoothstep(5.0, -25.0, x) * (1.0 - smoothstep(390.0, 420.0, s.d));
+  const double loops = std::sin(0.11 * x + 1.3 * std::sin(0.05 * s.d)) * std::sin(0.1 * y + 0.04 * x);
+  return body(loops > 0.15 + sparse ? hu::bowel : hu::fat);
 }
 
 Tissue Model::classify(const SliceContext& s, const RowContext& r, double x) const {
@@ -696,15 +718,12 @@ Tissue Model::classify(const SliceContext& s, const RowContext& r, double x) con
   }
   // Tubular viscera running through the whole trunk.
   if (sq((x - s.esophagus_x) / 9.0) + sq((y - s.esophagus_y) / 6.5) < 1.0) return body(hu::soft_tissue);
-  if (s.aorta_count > 0) {
-    const double e = aorta_excess(s, p);
-    if (e < 0.0) return body(hu::blood);
-    if (e < 3.0 && s.d < diaphragm_d(x, y)) return body(hu::fat);
-  }
+  const double aorta = s.aorta_count > 0 ? aorta_excess(s, p) : std::numeric_limits<double>::infinity();
+  if (aorta < 0.0) return body(hu::blood);
   if (s.ivc && a_.ivc.excess(p) < 0.0) return body(hu::blood);
 
   const double diaphragm = diaphragm_d(x, y);
-  if (s.d < diaphragm) return thorax(s, r, x);
+  if (s.d < diaphragm) return thorax(s, r, x, aorta);
   if (s.d < diaphragm + a_.diaphragm_mm) return body(hu::muscle);
   return abdomen(s, r, x);
 }

@@ -1,0 +1,77 @@
+#include "core/errors.h"
+#include "pipeline/case_file.h"
+
+#include <gtest/gtest.h>
+
+using namespace organsmith;
+namespace fs = std::filesystem;
+
+namespace {
+ExitCode parse_code(const std::string& text) {
+  try {
+    parse_case(text, "/cases/test.toml");
+  } catch (const Error& e) {
+    return e.code();
+  }
+  return ExitCode::ok;
+}
+}  // namespace
+
+TEST(CaseFile, EmbeddedDefaultRunsThePhantomWithBothOrgans) {
+  const CaseFile c = default_case();
+  EXPECT_TRUE(c.synthesize_phantom);
+  ASSERT_EQ(c.organs.size(), 2u);
+  EXPECT_EQ(c.organs[0].name, "gallbladder");
+  EXPECT_EQ(c.organs[1].name, "trachea");
+  EXPECT_EQ(c.phantom.size_vox, 512);
+  EXPECT_EQ(c.out_dir, fs::path("out"));
+}
+
+TEST(CaseFile, PathsAreRelativeToTheCaseFileAndSeedsParse) {
+  const CaseFile c = parse_case(R"(
+[case]
+name = "chest"
+input = "scans/chest"
+[ingest]
+series = "1.2.3"
+max_memory_mb = 2048
+[[organ]]
+name = "gallbladder"
+seed_lps_mm = [10.5, -20, 300]
+[[organ]]
+name = "trachea"
+seed_ijk = [256, 240, 12]
+[output]
+dir = "results"
+[stages.segment]
+iterations = 200
+)",
+                                "/cases/chest.toml");
+  EXPECT_FALSE(c.synthesize_phantom);
+  EXPECT_EQ(c.input, fs::path("/cases/scans/chest"));
+  EXPECT_EQ(c.out_dir, fs::path("/cases/results"));
+  EXPECT_EQ(c.ingest.series_uid, "1.2.3");
+  EXPECT_EQ(c.ingest.max_memory_bytes, std::int64_t(2048) << 20);
+  ASSERT_TRUE(c.organs[0].seed_lps_mm);
+  EXPECT_DOUBLE_EQ(c.organs[0].seed_lps_mm->x(), 10.5);
+  ASSERT_TRUE(c.organs[1].seed_ijk);
+  EXPECT_DOUBLE_EQ(c.organs[1].seed_ijk->z(), 12.0);
+  EXPECT_EQ(c.other_stages["segment"]["iterations"], 200);
+  // Resolved options round-trip into the manifest's JSON.
+  const auto j = to_json(c);
+  EXPECT_EQ(j["organs"][0]["seed_lps_mm"][2], 300.0);
+}
+
+TEST(CaseFile, MistakesAreRejectedNotDefaulted) {
+  EXPECT_EQ(parse_code("[case]\ninput = \"phantom\"\n"), ExitCode::ok);
+  EXPECT_EQ(parse_code("[case]\ninput = \"phantom\"\nnmae = \"x\"\n"), ExitCode::case_file);   // unknown key
+  EXPECT_EQ(parse_code("[phantom]\nsize = \"big\"\n"), ExitCode::case_file);                  // wrong type
+  EXPECT_EQ(parse_code("[phantom]\nsize = 4\n"), ExitCode::case_file);                        // out of range
+  EXPECT_EQ(parse_code("[[organ]]\nname = \"spleen\"\n"), ExitCode::case_file);               // unknown organ
+  EXPECT_EQ(parse_code("[[organ]]\nname = \"trachea\"\nseed_lps_mm = [1, 2]\n"), ExitCode::case_file);
+  EXPECT_EQ(parse_code("[[organ]]\nname = \"trachea\"\nseed_lps_mm = [1,2,3]\nseed_ijk = [1,2,3]\n"),
+            ExitCode::case_file);
+  EXPECT_EQ(parse_code("[[organ]]\nname = \"trachea\"\n[[organ]]\nname = \"trachea\"\n"), ExitCode::case_file);
+  EXPECT_EQ(parse_code("[case\n"), ExitCode::case_file);                                       // syntax
+  EXPECT_EQ(parse_code("[ingest]\nmax_memory_mb = -1\n"), ExitCode::case_file);
+}

@@ -1,0 +1,21 @@
+#pragma once
+// Subcommands contributed by the stage modules' command files (cmd_*.cpp). Each registers its
+// options on the application and returns what to run when the user chose it; main() dispatches
+// and turns organsmith::Error into the documented exit codes.
+
+#include <CLI/CLI.hpp>
+
+#include <functional>
+#include <vector>
+
+namespace organsmith {
+
+struct Command {
+  CLI::App* sub = nullptr;       ///< the registered subcommand
+  std::function<int()> run;      ///< returns the exit code; may throw organsmith::Error
+};
+
+/// `calibrate`, `uncertainty`, `materials` (physics).
+std::vector<Command> physics_commands(CLI::App& app);
+
+}  // namespace organsmith
