@@ -28,6 +28,7 @@ enum class ExitCode : int {
   case_file = 20,          ///< the case file is malformed or names bad values
   output = 30,             ///< an output could not be written
   cancelled = 40,          ///< the user cancelled
+  calibration_data = 21,   ///< calibration/uncertainty data unusable (NaN, too few points, non-monotone stretch)
 };
 
 /// Base of all organsmith errors. `path` is the offending input (may be empty), `hint` what to

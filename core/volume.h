@@ -1,6 +1,7 @@
 #pragma once
 // Scalar CT volume and label map on a regular grid, LPS millimetres.
 
+#include "core/buffer.h"
 #include "core/grid.h"
 
 #include <cstdint>
@@ -10,10 +11,11 @@
 namespace organsmith {
 
 /// A CT volume in Hounsfield units (rescale slope/intercept already applied).
-/// `hu` holds grid.voxel_count() values, i fastest, then j, then k.
+/// `hu` holds grid.voxel_count() values, i fastest, then j, then k. (Its resize() does not
+/// zero new voxels; see core/buffer.h.)
 struct Volume {
   ImageGrid grid;
-  std::vector<float> hu;
+  VoxelBuffer<float> hu;
 
   float at(std::int64_t i, std::int64_t j, std::int64_t k) const { return hu[grid.offset(i, j, k)]; }
   /// Pointer to the first voxel of slice k (size_vox[0] * size_vox[1] values).
@@ -33,10 +35,11 @@ enum class Label : std::uint8_t {
 /// Lower-case name of a label ("gallbladder", …); "label<N>" for values without a name.
 std::string label_name(std::uint8_t value);
 
-/// Per-voxel uint8 labels on the grid of a Volume (values: see `Label`).
+/// Per-voxel uint8 labels on the grid of a Volume (values: see `Label`). resize() does not
+/// zero new voxels; use assign(n, 0).
 struct LabelMap {
   ImageGrid grid;
-  std::vector<std::uint8_t> labels;
+  VoxelBuffer<std::uint8_t> labels;
 
   std::uint8_t at(std::int64_t i, std::int64_t j, std::int64_t k) const {
     return labels[grid.offset(i, j, k)];

@@ -15,7 +15,11 @@ struct Command {
   std::function<int()> run;      ///< returns the exit code; may throw organsmith::Error
 };
 
-/// `calibrate`, `uncertainty`, `materials` (physics).
+/// `calibrate`, `uncertainty`, `materials` (physics; pipeline/cmd_physics.cpp).
 std::vector<Command> physics_commands(CLI::App& app);
+/// `segment` (segmentation; pipeline/cmd_segment.cpp).
+std::vector<Command> segmentation_commands(CLI::App& app);
+/// `mesh` (meshing; pipeline/cmd_mesh.cpp).
+std::vector<Command> meshing_commands(CLI::App& app);
 
 }  // namespace organsmith

@@ -17,6 +17,7 @@
 #include <gdcmUIDs.h>
 #include <spdlog/spdlog.h>
 #include <tbb/parallel_for.h>
+#include <fcntl.h>
 #include <unistd.h>
 
 #include <Eigen/Geometry>
@@ -54,6 +55,17 @@ struct FileHeader {
   double slice_thickness_mm = 0.0;
   double gantry_tilt_deg = 0.0;
   bool has_pixel_data = false;
+  // For the direct path (uncompressed little-endian, no bit packing); GDCM decodes the rest.
+  bool raw_little_endian = false;
+  int bits_allocated = 0, bits_stored = 0, pixel_representation = 0, samples_per_pixel = 1;
+  std::string photometric;
+  double rescale_slope = 1.0, rescale_intercept = 0.0;
+  std::uint64_t pixel_offset = 0, pixel_bytes = 0;  // of the pixel data value, when its length is defined
+};
+
+/// Where the pixel data value sits in a file, found by walking its elements.
+struct PixelLocation {
+  std::uint64_t offset = 0, bytes = 0;  // bytes = 0: undefined length (encapsulated)
 };
 
 std::string trimmed(std::string s) {
@@ -100,7 +112,7 @@ std::uint16_t le16(const unsigned char* p) { return std::uint16_t(p[0] | (p[1] <
 /// every declared length fits in the file. GDCM aborts on some truncated files (an assertion
 /// in its compatibility reader), so truncation must be caught before GDCM sees the file.
 /// Sequences and encapsulated pixel data with undefined length end the walk (GDCM then checks).
-bool structurally_complete(const fs::path& path, std::string& why) {
+bool structurally_complete(const fs::path& path, std::string& why, PixelLocation& pixels) {
   std::error_code ec;
   const std::uint64_t n = fs::file_size(path, ec);
   std::ifstream in(path, std::ios::binary);
@@ -152,7 +164,10 @@ bool structurally_complete(const fs::path& path, std::string& why) {
       why = m.str();
       return false;
     }
-    if (group == 0x7fe0 && element == 0x0010) return true;
+    if (group == 0x7fe0 && element == 0x0010) {
+      pixels = {pos + header, length};
+      return true;
+    }
     pos += header + length;
   }
   if (pos != n) {
@@ -163,7 +178,7 @@ bool structurally_complete(const fs::path& path, std::string& why) {
 }
 
 /// Reads the header of `path`; nullopt when it is not DICOM or cannot be parsed.
-std::optional<FileHeader> read_header(const fs::path& path) {
+std::optional<FileHeader> read_header(const fs::path& path, const PixelLocation& pixels) {
   gdcm::Reader reader;
   reader.SetFileName(path.string().c_str());
   if (!reader.ReadUpToTag(kPixelData)) return std::nullopt;
@@ -179,7 +194,18 @@ std::optional<FileHeader> read_header(const fs::path& path) {
     gdcm::UIDs uid;
     const char* ts = gdcm::TransferSyntax::GetTSString(file.GetHeader().GetDataSetTransferSyntax());
     h.transfer_syntax = ts && uid.SetFromUID(ts) ? uid.GetName() : (ts ? ts : "unknown");
+    const std::string ts_uid = ts ? ts : "";
+    h.raw_little_endian = ts_uid == "1.2.840.10008.1.2" || ts_uid == "1.2.840.10008.1.2.1";
   }
+  h.bits_allocated = us_value<0x0028, 0x0100>(ds);
+  h.bits_stored = us_value<0x0028, 0x0101>(ds);
+  h.pixel_representation = us_value<0x0028, 0x0103>(ds);
+  if (ds.FindDataElement(gdcm::Tag(0x0028, 0x0002))) h.samples_per_pixel = us_value<0x0028, 0x0002>(ds);
+  h.photometric = string_value(ds, gdcm::Tag(0x0028, 0x0004));
+  if (const auto v = numbers(string_value(ds, gdcm::Tag(0x0028, 0x1053))); v.size() == 1) h.rescale_slope = v[0];
+  if (const auto v = numbers(string_value(ds, gdcm::Tag(0x0028, 0x1052))); v.size() == 1) h.rescale_intercept = v[0];
+  h.pixel_offset = pixels.offset;
+  h.pixel_bytes = pixels.bytes;
   h.rows = us_value<0x0028, 0x0010>(ds);
   h.columns = us_value<0x0028, 0x0011>(ds);
   if (const auto f = numbers(string_value(ds, gdcm::Tag(0x0028, 0x0008))); f.size() == 1 && f[0] >= 1)
@@ -241,7 +267,43 @@ SeriesSummary summarize(const std::vector<FileHeader>& files) {
 }
 
 /// Decodes one file into float HU values (rescale applied), columns × rows × frames.
-bool decode(const fs::path& path, float* out, std::size_t expected, std::string& why) {
+/// Value range of a decoded slice.
+struct Range {
+  float lo = INFINITY, hi = -INFINITY;
+  void merge(const Range& o) { lo = std::min(lo, o.lo), hi = std::max(hi, o.hi); }
+};
+
+template <typename T>
+Range convert(const T* px, std::size_t n, double slope, double intercept, float* out) {
+  Range r;
+  const float s = float(slope), b = float(intercept);
+  // Split min/max from the store so the compiler vectorises both loops.
+  for (std::size_t a = 0; a < n; ++a) out[a] = float(px[a]) * s + b;
+  float lo = out[0], hi = out[0];
+  for (std::size_t a = 0; a < n; ++a) lo = std::min(lo, out[a]), hi = std::max(hi, out[a]);
+  r.lo = lo, r.hi = hi;
+  return r;
+}
+
+/// The direct path: 16-bit uncompressed little-endian greyscale, read straight from the file
+/// (most CT). Returns false when the file does not qualify (GDCM then decodes it).
+bool decode_direct(const FileHeader& h, float* out, std::size_t expected, Range& range) {
+  if (!h.raw_little_endian || h.bits_allocated != 16 || h.bits_stored != 16 || h.samples_per_pixel != 1 ||
+      h.photometric != "MONOCHROME2" || h.frames != 1 || h.pixel_bytes < expected * 2)
+    return false;
+  thread_local std::vector<std::uint16_t> buf;
+  buf.resize(expected);
+  std::ifstream in(h.path, std::ios::binary);
+  in.seekg(std::streamoff(h.pixel_offset));
+  in.read(reinterpret_cast<char*>(buf.data()), std::streamsize(expected * 2));
+  if (std::size_t(in.gcount()) != expected * 2) return false;
+  range = h.pixel_representation == 1
+              ? convert(reinterpret_cast<const std::int16_t*>(buf.data()), expected, h.rescale_slope, h.rescale_intercept, out)
+              : convert(buf.data(), expected, h.rescale_slope, h.rescale_intercept, out);
+  return true;
+}
+
+bool decode(const fs::path& path, float* out, std::size_t expected, std::string& why, Range& range) {
   gdcm::ImageReader reader;
   reader.SetFileName(path.string().c_str());
   if (!reader.Read()) {
@@ -265,26 +327,24 @@ bool decode(const fs::path& path, float* out, std::size_t expected, std::string&
     why = "holds " + std::to_string(n) + " pixels where the series' slices hold " + std::to_string(expected);
     return false;
   }
-  const double slope = image.GetSlope();
-  const double intercept = image.GetIntercept();
-  auto convert = [&](auto* px) {
-    for (std::size_t a = 0; a < n; ++a) out[a] = float(double(px[a]) * slope + intercept);
-  };
-  switch (pf.GetScalarType()) {
-    case gdcm::PixelFormat::INT16: convert(reinterpret_cast<const std::int16_t*>(raw.data())); break;
-    case gdcm::PixelFormat::UINT16: convert(reinterpret_cast<const std::uint16_t*>(raw.data())); break;
-    case gdcm::PixelFormat::INT8: convert(reinterpret_cast<const std::int8_t*>(raw.data())); break;
-    case gdcm::PixelFormat::UINT8: convert(reinterpret_cast<const std::uint8_t*>(raw.data())); break;
-    case gdcm::PixelFormat::INT32: convert(reinterpret_cast<const std::int32_t*>(raw.data())); break;
-    case gdcm::PixelFormat::UINT32: convert(reinterpret_cast<const std::uint32_t*>(raw.data())); break;
-    default:
-      why = std::string("has an unsupported pixel type ") + pf.GetScalarTypeAsString();
-      return false;
-  }
-  // Bits stored below bits allocated: GDCM already masks them for us when decoding.
   if (image.GetPhotometricInterpretation() == gdcm::PhotometricInterpretation::MONOCHROME1) {
     why = "is MONOCHROME1 (inverted greyscale), which CT does not use";
     return false;
+  }
+  // Bits stored below bits allocated are masked and sign-extended by GDCM.
+  const double slope = image.GetSlope();
+  const double intercept = image.GetIntercept();
+  auto conv = [&](auto* px) { range = convert(px, n, slope, intercept, out); };
+  switch (pf.GetScalarType()) {
+    case gdcm::PixelFormat::INT16: conv(reinterpret_cast<const std::int16_t*>(raw.data())); break;
+    case gdcm::PixelFormat::UINT16: conv(reinterpret_cast<const std::uint16_t*>(raw.data())); break;
+    case gdcm::PixelFormat::INT8: conv(reinterpret_cast<const std::int8_t*>(raw.data())); break;
+    case gdcm::PixelFormat::UINT8: conv(reinterpret_cast<const std::uint8_t*>(raw.data())); break;
+    case gdcm::PixelFormat::INT32: conv(reinterpret_cast<const std::int32_t*>(raw.data())); break;
+    case gdcm::PixelFormat::UINT32: conv(reinterpret_cast<const std::uint32_t*>(raw.data())); break;
+    default:
+      why = std::string("has an unsupported pixel type ") + pf.GetScalarTypeAsString();
+      return false;
   }
   return true;
 }
@@ -324,7 +384,8 @@ IngestResult read_multiframe(const FileHeader& h, const IngestOptions& options, 
   std::string why;
   const std::size_t n = std::size_t(h.rows) * std::size_t(h.columns) * std::size_t(h.frames);
   result.volume.hu.resize(n);
-  if (!decode(h.path, result.volume.hu.data(), n, why))
+  Range range;
+  if (!decode(h.path, result.volume.hu.data(), n, why, range))
     throw InputError(ExitCode::corrupt_file, "the multi-frame DICOM file " + why, h.path,
                      "re-export or re-transfer the file");
   gdcm::ImageReader reader;
@@ -344,6 +405,8 @@ IngestResult read_multiframe(const FileHeader& h, const IngestOptions& options, 
   g.direction_lps.col(1) = col.normalized();
   g.direction_lps.col(2) = row.cross(col).normalized();
   g.validate();
+  result.report.hu_min = range.lo;
+  result.report.hu_max = range.hi;
   progress.report(1.0, "decoding multi-frame DICOM");
   return result;
 }
@@ -479,6 +542,14 @@ IngestResult read_dicom(const fs::path& input, const IngestOptions& options, Pro
                      "point organsmith at the folder that holds the series' .dcm files");
 
   // Pass 1: headers.
+  // Ask the kernel to start reading every file now: the header and decode passes then find
+  // their pages in memory instead of waiting on the disk two requests at a time.
+  for (const auto& f : files) {
+    const int fd = open(f.c_str(), O_RDONLY);
+    if (fd < 0) continue;
+    posix_fadvise(fd, 0, 0, POSIX_FADV_WILLNEED);
+    close(fd);
+  }
   gdcm::Trace::SetWarning(false);  // GDCM's own chatter; problems are reported by organsmith
   gdcm::Trace::SetDebug(false);
   std::vector<std::optional<FileHeader>> headers(files.size());
@@ -487,7 +558,8 @@ IngestResult read_dicom(const fs::path& input, const IngestOptions& options, Pro
   tbb::parallel_for(std::size_t(0), files.size(), [&](std::size_t a) {
     // Only Part-10 files (with the "DICM" preamble) are considered; GDCM is given only files
     // whose element lengths are consistent with their size.
-    if (has_dicom_magic(files[a]) && structurally_complete(files[a], broken[a])) headers[a] = read_header(files[a]);
+    PixelLocation px;
+    if (has_dicom_magic(files[a]) && structurally_complete(files[a], broken[a], px)) headers[a] = read_header(files[a], px);
     const std::size_t d = ++done;
     if (d % 64 == 0) progress.report(0.1 * double(d) / double(files.size()), "scanning DICOM headers");
   });
@@ -572,25 +644,32 @@ IngestResult read_dicom(const fs::path& input, const IngestOptions& options, Pro
   Volume& vol = result.volume;
   auto decode_stack = [&](const Stack& st) {
     vol.grid = st.grid;
-    vol.hu.assign(std::size_t(vol.grid.voxel_count()), 0.0f);
+    vol.hu.resize(std::size_t(vol.grid.voxel_count()));
     const std::size_t per_slice = std::size_t(vol.grid.slice_voxel_count());
     std::vector<std::string> failure(st.slices.size());
+    std::vector<Range> ranges(st.slices.size());
     done = 0;
     tbb::parallel_for(std::size_t(0), st.slices.size(), [&](std::size_t k) {
       progress.check_cancelled();
-      decode(st.slices[k]->path, vol.hu.data() + k * per_slice, per_slice, failure[k]);
+      float* dst = vol.hu.data() + k * per_slice;
+      if (!decode_direct(*st.slices[k], dst, per_slice, ranges[k]))
+        decode(st.slices[k]->path, dst, per_slice, failure[k], ranges[k]);
       const std::size_t d = ++done;
       progress.report(0.1 + 0.9 * double(d) / double(st.slices.size()), "decoding slices");
     });
     std::vector<const FileHeader*> good;
+    Range all;
     for (std::size_t k = 0; k < st.slices.size(); ++k) {
       if (failure[k].empty()) {
         good.push_back(st.slices[k]);
+        all.merge(ranges[k]);
         continue;
       }
       corrupt.push_back(st.slices[k]->path);
       report.warnings.push_back("skipped " + st.slices[k]->path.filename().string() + ": it " + failure[k]);
     }
+    report.hu_min = all.lo;
+    report.hu_max = all.hi;
     return good;
   };
   std::vector<const FileHeader*> good = decode_stack(stack);

@@ -59,7 +59,10 @@ std::string volume_file_format(const fs::path& path) {
 Volume read_volume_file(const fs::path& path) {
   itk_io::PlainGrid p;
   Volume v;
-  itk_io::read_float(path.string(), p, v.hu);
+  itk_io::read_float(path.string(), p, [&](std::size_t n) {
+    v.hu.resize(n);
+    return v.hu.data();
+  });
   v.grid = grid(p);
   v.grid.validate();
   return v;
@@ -68,7 +71,10 @@ Volume read_volume_file(const fs::path& path) {
 LabelMap read_label_map(const fs::path& path) {
   itk_io::PlainGrid p;
   std::vector<float> values;
-  itk_io::read_float(path.string(), p, values);
+  itk_io::read_float(path.string(), p, [&](std::size_t n) {
+    values.resize(n);
+    return values.data();
+  });
   LabelMap m;
   m.grid = grid(p);
   m.labels.resize(values.size());

@@ -6,6 +6,7 @@
 #include "pipeline/image_io.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace organsmith {
 
@@ -21,17 +22,16 @@ IngestResult ingest(const fs::path& input, const IngestOptions& options, Progres
     progress.report(0.0, "reading volume");
     result.volume = read_volume_file(input);
     result.report.format = volume_file_format(input);
+    float lo = INFINITY, hi = -INFINITY;
+    for (float v : result.volume.hu) lo = std::min(lo, v), hi = std::max(hi, v);
+    result.report.hu_min = lo;
+    result.report.hu_max = hi;
     progress.report(1.0, "reading volume");
   } else {
     if (fs::is_regular_file(input) && !has_dicom_magic(input))
       throw InputError(ExitCode::unsupported_input, "file is neither DICOM nor a known volume format",
                        input, "give a DICOM directory or file, or a .nii/.nii.gz/.nrrd/.nhdr/.mha/.mhd file");
     result = read_dicom(input, options, progress);
-  }
-  if (!result.volume.hu.empty()) {
-    const auto [lo, hi] = std::minmax_element(result.volume.hu.begin(), result.volume.hu.end());
-    result.report.hu_min = *lo;
-    result.report.hu_max = *hi;
   }
   return result;
 }

@@ -9,6 +9,7 @@
 #include <itkNiftiImageIOFactory.h>
 #include <itkNrrdImageIOFactory.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <mutex>
 
@@ -65,7 +66,7 @@ void write_itk(const std::string& path, const PlainGrid& g, const Pixel* data) {
 
 }  // namespace
 
-void read_float(const std::string& path, PlainGrid& g, std::vector<float>& values) {
+void read_float(const std::string& path, PlainGrid& g, const std::function<float*(std::size_t)>& allocate) {
   register_factories();
   if (!std::filesystem::exists(path))
     throw InputError(ExitCode::input_not_found, "file does not exist", path, "check the path");
@@ -89,7 +90,7 @@ void read_float(const std::string& path, PlainGrid& g, std::vector<float>& value
     for (int b = 0; b < 3; ++b) g.direction[3 * a + b] = image->GetDirection()(a, b);
     n *= size[a];
   }
-  values.assign(image->GetBufferPointer(), image->GetBufferPointer() + n);
+  std::copy(image->GetBufferPointer(), image->GetBufferPointer() + n, allocate(n));
 }
 
 void write_float(const std::string& path, const PlainGrid& grid, const float* values) {

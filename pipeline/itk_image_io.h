@@ -4,6 +4,7 @@
 // image_io lives in itk_image_io.cpp and sees only these structs.
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -16,8 +17,9 @@ struct PlainGrid {
   double direction[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  ///< row-major; columns are axis directions
 };
 
-/// Reads any ITK-readable scalar image as float. Throws InputError.
-void read_float(const std::string& path, PlainGrid& grid, std::vector<float>& values);
+/// Reads any ITK-readable scalar image as float into the buffer that `allocate(voxel_count)`
+/// returns. Throws InputError.
+void read_float(const std::string& path, PlainGrid& grid, const std::function<float*(std::size_t)>& allocate);
 void write_float(const std::string& path, const PlainGrid& grid, const float* values);
 void write_uint8(const std::string& path, const PlainGrid& grid, const std::uint8_t* values);
 

@@ -220,7 +220,9 @@ int main(int argc, char** argv) {
   run->add_flag("--print-default-case", print_default, "print the embedded default case and exit");
   run_flags.add_to(run);
 
-  std::vector<Command> commands = physics_commands(app);
+  std::vector<Command> commands;
+  for (auto* add : {&segmentation_commands, &meshing_commands, &physics_commands})
+    for (auto& c : (*add)(app)) commands.push_back(std::move(c));
 
   try {
     app.parse(argc, argv);
