@@ -7,6 +7,7 @@
 #include "pipeline/ingest.h"
 #include "test_support.h"
 
+#include <gdcmImageWriter.h>
 #include <gdcmReader.h>
 #include <gdcmWriter.h>
 #include <gtest/gtest.h>
@@ -303,4 +304,53 @@ TEST(IngestErrors, TooLargeForTheMemoryBudgetAndUnknownSeries) {
   IngestOptions other;
   other.series_uid = "1.2.3.4";
   EXPECT_EQ(ingest_code(tmp / "dicom", other), ExitCode::series_not_found);
+}
+
+// ---- multi-frame ------------------------------------------------------------------------------
+
+TEST(Ingest, EnhancedMultiFrameCtFile) {
+  ScratchDir tmp("multiframe");
+  const Volume v = coded_volume(20, 7, 3.0);
+  std::vector<std::int16_t> px(v.hu.size());
+  for (std::size_t a = 0; a < px.size(); ++a) px[a] = std::int16_t(std::lround(v.hu[a]) + 1024);  // stored = HU + 1024
+
+  gdcm::ImageWriter w;
+  gdcm::Image& im = w.GetImage();
+  im.SetNumberOfDimensions(3);
+  for (unsigned a = 0; a < 3; ++a) im.SetDimension(a, unsigned(v.grid.size_vox[a]));
+  im.SetPixelFormat(gdcm::PixelFormat::INT16);
+  im.SetPhotometricInterpretation(gdcm::PhotometricInterpretation::MONOCHROME2);
+  im.SetTransferSyntax(gdcm::TransferSyntax::ExplicitVRLittleEndian);
+  for (unsigned a = 0; a < 3; ++a) {
+    im.SetOrigin(a, v.grid.origin_lps_mm[a]);
+    im.SetSpacing(a, v.grid.spacing_mm[a]);
+  }
+  const double dircos[6] = {1, 0, 0, 0, 1, 0};
+  im.SetDirectionCosines(dircos);
+  im.SetIntercept(-1024.0);
+  im.SetSlope(1.0);
+  gdcm::DataElement pixel_data(gdcm::Tag(0x7fe0, 0x0010));
+  pixel_data.SetByteValue(reinterpret_cast<const char*>(px.data()), std::uint32_t(px.size() * 2));
+  im.SetDataElement(pixel_data);
+  gdcm::DataSet& ds = w.GetFile().GetDataSet();
+  auto put = [&](std::uint16_t g, std::uint16_t e, const gdcm::VR& vr, std::string s) {
+    if (s.size() % 2) s.push_back(vr == gdcm::VR::UI ? '\0' : ' ');
+    gdcm::DataElement de(gdcm::Tag(g, e));
+    de.SetVR(vr);
+    de.SetByteValue(s.data(), std::uint32_t(s.size()));
+    ds.Replace(de);
+  };
+  put(0x0008, 0x0016, gdcm::VR::UI, "1.2.840.10008.5.1.4.1.1.2.1");  // Enhanced CT Image Storage
+  put(0x0008, 0x0018, gdcm::VR::UI, "2.25.1234567");
+  put(0x0008, 0x0060, gdcm::VR::CS, "CT");
+  put(0x0020, 0x000e, gdcm::VR::UI, "2.25.7654321");
+  w.SetFileName((tmp / "enhanced.dcm").string().c_str());
+  ASSERT_TRUE(w.Write());
+
+  NullProgress np;
+  const IngestResult r = ingest(tmp / "enhanced.dcm", {}, np);
+  EXPECT_EQ(r.report.format, "DICOM multi-frame");
+  EXPECT_TRUE(r.volume.grid.same_geometry(v.grid, 1e-3))
+      << r.volume.grid.origin_lps_mm.transpose() << " / " << r.volume.grid.spacing_mm.transpose();
+  EXPECT_EQ(r.volume.hu, v.hu);
 }
