@@ -21,5 +21,7 @@ std::vector<Command> physics_commands(CLI::App& app);
 std::vector<Command> segmentation_commands(CLI::App& app);
 /// `mesh` (meshing; pipeline/cmd_mesh.cpp).
 std::vector<Command> meshing_commands(CLI::App& app);
+/// `snapshot`, `preview` (viewer; pipeline/cmd_viewer.cpp).
+std::vector<Command> viewer_commands(CLI::App& app);
 
 }  // namespace organsmith
