@@ -1,26 +1,16 @@
 #include "core/buffer.h"
 
-#include <sys/mman.h>
-
 #include <cstdlib>
 
 namespace organsmith {
 
-namespace {
-constexpr std::size_t kHugePage = std::size_t(2) << 20;
-}
-
+// Transparent huge pages were tried here (2 MiB alignment + MADV_HUGEPAGE): they cut page
+// faults on an idle machine, but with the kernel's default "defrag=madvise" policy every fault
+// may compact memory synchronously, and under load a 300 MB volume then took minutes to
+// allocate. Plain malloc keeps allocation time predictable.
 void* allocate_large_buffer(std::size_t bytes) {
-  if (bytes == 0) bytes = 1;
-  if (bytes < kHugePage) {
-    void* p = std::malloc(bytes);
-    if (!p) throw std::bad_alloc();
-    return p;
-  }
-  const std::size_t rounded = (bytes + kHugePage - 1) / kHugePage * kHugePage;
-  void* p = std::aligned_alloc(kHugePage, rounded);
+  void* p = std::malloc(bytes == 0 ? 1 : bytes);
   if (!p) throw std::bad_alloc();
-  madvise(p, rounded, MADV_HUGEPAGE);  // advice only: failure is harmless
   return p;
 }
 

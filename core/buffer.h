@@ -1,7 +1,7 @@
 #pragma once
-// Allocator for voxel buffers (hundreds of MB): no zero-fill on resize, huge pages where the
-// kernel offers them. A CT volume is always overwritten right after allocation, and zeroing
-// 300 MB on one thread costs more than decoding it on two.
+// Allocator for voxel buffers (hundreds of MB): no zero-fill on resize. A CT volume is always
+// overwritten right after allocation, and zeroing 300 MB on one thread costs more than
+// decoding it on two (the first touch then happens in the parallel decoder).
 
 #include <cstddef>
 #include <new>
@@ -11,8 +11,7 @@
 namespace organsmith {
 
 /// Default-initialising allocator: `resize(n)` leaves new elements of trivial types
-/// uninitialised (use `assign(n, value)` when zeros are wanted). Blocks of 2 MiB or more are
-/// 2 MiB-aligned and marked for transparent huge pages.
+/// uninitialised (use `assign(n, value)` when zeros are wanted).
 template <typename T>
 struct LargeBufferAllocator {
   using value_type = T;

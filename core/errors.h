@@ -29,6 +29,10 @@ enum class ExitCode : int {
   output = 30,             ///< an output could not be written
   cancelled = 40,          ///< the user cancelled
   calibration_data = 21,   ///< calibration/uncertainty data unusable (NaN, too few points, non-monotone stretch)
+  mesh_input = 60,         ///< a label map unusable for meshing (empty, organ absent, mask too small)
+  mesh_quality = 61,       ///< a mesh failed its quality gate (surface guarantees or tetrahedral quality)
+  organ_not_found = 50,    ///< segmentation could not find the organ (no label written)
+  bad_seed = 51,           ///< a segmentation seed outside the image or not inside the organ
 };
 
 /// Base of all organsmith errors. `path` is the offending input (may be empty), `hint` what to

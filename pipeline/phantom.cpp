@@ -11,6 +11,7 @@
 #include <cmath>
 #include <limits>
 #include <optional>
+#include <string>
 #include <vector>
 
 // How the phantom is laid out (data/phantom.md lists the anatomy with its HU values).
@@ -135,13 +136,14 @@ class Ziggurat {
       const double x = double(h) * w_[layer];
       if (std::uint64_t(h < 0 ? -h : h) < k_[layer]) return x;
       if (layer == 0) return tail(rng, h > 0);
-      if (f_[layer] + rng.uniform() * (f_[layer - 1] - f_[layer]) < std::exp(-0.5 * x * x)) return x;
+      if (f_[layer] + rng.uniform() * (f_[layer - 1] - f_[layer]) < std::exp(-0.5 * x * x))
+        return x;
     }
   }
 
  private:
-  static constexpr double kR = 3.442619855899;         // start of the tail
-  static constexpr double kV = 9.91256303526217e-3;    // area of each layer
+  static constexpr double kR = 3.442619855899;       // start of the tail
+  static constexpr double kV = 9.91256303526217e-3;  // area of each layer
   double tail(SplitMix64& rng, bool positive) const {
     double x, y;
     do {
@@ -193,7 +195,12 @@ struct Ellipsoid {
   Ellipsoid() = default;
   /// `angle_rad` rotates the x axis toward +y.
   Ellipsoid(V3 centre, double rx_mm, double ry_mm, double rd_mm, double angle_rad = 0.0)
-      : c(centre), rx(rx_mm), ry(ry_mm), rd(rd_mm), cos_(std::cos(angle_rad)), sin_(std::sin(angle_rad)) {}
+      : c(centre),
+        rx(rx_mm),
+        ry(ry_mm),
+        rd(rd_mm),
+        cos_(std::cos(angle_rad)),
+        sin_(std::sin(angle_rad)) {}
 
   double q_depth(double d) const { return sq((d - c.d) / rd); }
   double q_plane(double x, double y) const {
@@ -249,8 +256,8 @@ struct Anatomy {
 
   // Abdomen.
   V3 gb_neck{-20.0, -15.0, 320.0};
-  V3 gb_axis{};  // unit vector from the neck toward the fundus
-  V3 gb_bed{};   // unit vector perpendicular to the axis, toward the liver
+  V3 gb_axis{};             // unit vector from the neck toward the fundus
+  V3 gb_bed{};              // unit vector perpendicular to the axis, toward the liver
   double gb_length = 80.0;  // tip to tip
   double gb_r_neck = 6.0;
   double gb_r_fundus = 15.0;
@@ -299,8 +306,8 @@ Anatomy make_anatomy(std::uint64_t seed) {
       {r1, r1 + 22.0 * normalized({-0.95, 0.1, -0.2}), 4.5, 4.0},  // right upper lobe
       {r1, r1 + 45.0 * normalized({-0.35, 0.2, 0.91}), 6.0, 4.5},  // intermediate → lower
       {root, l1, 6.5, 6.0},
-      {l1, l1 + 20.0 * normalized({0.9, -0.2, -0.3}), 4.5, 4.0},   // left upper lobe
-      {l1, l1 + 40.0 * normalized({0.3, 0.3, 0.9}), 5.0, 4.0},     // left lower lobe
+      {l1, l1 + 20.0 * normalized({0.9, -0.2, -0.3}), 4.5, 4.0},  // left upper lobe
+      {l1, l1 + 40.0 * normalized({0.3, 0.3, 0.9}), 5.0, 4.0},    // left lower lobe
   }};
 
   // Ascending aorta, arch passing left of the trachea, descending beside the spine.
@@ -461,9 +468,11 @@ SliceContext make_slice(const Anatomy& a, double d) {
     const double reach = std::max(v.ra, v.rb) + 5.0;
     const std::array<double, 4> box{std::min(v.a.x, v.b.x) - reach, std::max(v.a.x, v.b.x) + reach,
                                     std::min(v.a.y, v.b.y) - reach, std::max(v.a.y, v.b.y) + reach};
-    s.aorta_box = s.aorta_count == 1 ? box
-                                     : std::array<double, 4>{std::min(s.aorta_box[0], box[0]), std::max(s.aorta_box[1], box[1]),
-                                                             std::min(s.aorta_box[2], box[2]), std::max(s.aorta_box[3], box[3])};
+    s.aorta_box = s.aorta_count == 1
+                      ? box
+                      : std::array<double, 4>{
+                            std::min(s.aorta_box[0], box[0]), std::max(s.aorta_box[1], box[1]),
+                            std::min(s.aorta_box[2], box[2]), std::max(s.aorta_box[3], box[3])};
   }
   // The esophagus follows the trachea, then swings left and forward to the stomach.
   const double to_stomach = smoothstep(220.0, 320.0, d);
@@ -476,7 +485,7 @@ SliceContext make_slice(const Anatomy& a, double d) {
   s.lungs = d >= a.apex_d;
   const double apex_centre = a.apex_d + a.apex_dome_mm;
   s.apex_q = d < apex_centre ? sq((apex_centre - d) / a.apex_dome_mm) : 0.0;
-  s.neck = d < a.apex_d + 5.0;
+  s.neck = d < a.apex_d;
 
   s.stomach_q = a.stomach.q_depth(d);
   s.spleen_q = a.spleen.q_depth(d);
@@ -501,8 +510,8 @@ RowContext make_row(const SliceContext& s, double y) {
   r.y = y;
   const double v = y - s.trunk_y;
   for (int l = 0; l < kLayerCount; ++l)
-    r.half_width[std::size_t(l)] = superellipse_half_width(s.layers[std::size_t(l)].a,
-                                                           s.layers[std::size_t(l)].b, s.trunk_n, v);
+    r.half_width[std::size_t(l)] = superellipse_half_width(
+        s.layers[std::size_t(l)].a, s.layers[std::size_t(l)].b, s.trunk_n, v);
   return r;
 }
 
@@ -538,8 +547,9 @@ class Model {
 };
 
 double Model::diaphragm_d(double x, double y) const {
-  // Two paraboloid domes; the lower envelope of the lungs is the higher (smaller d) of them.
-  // The recesses reach far lower behind (posterior costophrenic recess) than in front.
+  // Paraboloid domes, right higher than left, and the flatter central tendon under the heart;
+  // the lungs end at the highest (smallest d) of them. The recesses reach far lower behind
+  // (posterior costophrenic recess) than in front.
   const auto dome = [&](const V3& c) {
     const double dy = y - c.y;
     return c.d + 55.0 * sq((x - c.x) / 85.0) + (dy < 0.0 ? 25.0 : 55.0) * sq(dy / 80.0);
@@ -552,13 +562,16 @@ double Model::diaphragm_d(double x, double y) const {
 bool Model::paraspinal(const SliceContext& s, double x, double y) const {
   // The erector spinae fill the gutter behind the transverse processes; the lungs curve
   // around them.
-  return sq(x / 46.0) + sq((y - s.canal_y - 22.0) / 30.0) < 1.0 || (std::abs(x) < 30.0 && y > s.canal_y);
+  return sq(x / 46.0) + sq((y - s.canal_y - 22.0) / 30.0) < 1.0 ||
+         (std::abs(x) < 30.0 && y > s.canal_y);
 }
 
 double Model::aorta_excess(const SliceContext& s, V3 p) const {
   double e = std::numeric_limits<double>::infinity();
-  if (p.x < s.aorta_box[0] || p.x > s.aorta_box[1] || p.y < s.aorta_box[2] || p.y > s.aorta_box[3]) return e;
-  for (int i = 0; i < s.aorta_count; ++i) e = std::min(e, a_.aorta[std::size_t(s.aorta[std::size_t(i)])].excess(p));
+  if (p.x < s.aorta_box[0] || p.x > s.aorta_box[1] || p.y < s.aorta_box[2] || p.y > s.aorta_box[3])
+    return e;
+  for (int i = 0; i < s.aorta_count; ++i)
+    e = std::min(e, a_.aorta[std::size_t(s.aorta[std::size_t(i)])].excess(p));
   return e;
 }
 
@@ -608,8 +621,8 @@ std::optional<Tissue> Model::chest_wall(const SliceContext& s, double x, double 
   const double v = (y - s.trunk_y) / s.ring.b;
   const double theta = std::atan2(u, v);  // 0 posterior, π/2 lateral, π anterior
   // Offset across the chest wall from the rib centre line, mm (positive outward).
-  const double rho = std::pow(std::pow(u, s.trunk_n) + std::pow(std::abs(v), s.trunk_n),
-                              1.0 / s.trunk_n);
+  const double rho =
+      std::pow(std::pow(u, s.trunk_n) + std::pow(std::abs(v), s.trunk_n), 1.0 / s.trunk_n);
   const double offset = (rho - 1.0) * std::hypot(x, y - s.trunk_y) / rho;
 
   if (s.d > 105.0 && s.d < 290.0 && theta > 2.6) {
@@ -643,8 +656,10 @@ bool Model::lung_region(const SliceContext& s, const RowContext& r, double x) co
   }
   // The mediastinum is widest around the trachea and great vessels, narrow behind the
   // sternum where the lungs almost meet.
-  const double mediastinum = y < -60.0 ? 10.0 : (y < -30.0 ? lerp(10.0, 22.0, (y + 60.0) / 30.0)
-                                                           : (y < 20.0 ? lerp(22.0, 26.0, (y + 30.0) / 50.0) : 22.0));
+  const double mediastinum =
+      y < -60.0 ? 10.0
+                : (y < -30.0 ? lerp(10.0, 22.0, (y + 60.0) / 30.0)
+                             : (y < 20.0 ? lerp(22.0, 26.0, (y + 30.0) / 50.0) : 22.0));
   if (std::abs(x - 3.0) < mediastinum) return false;
   if (sq(x) + sq(y - s.vb_y) < sq(s.vb_r + 5.0)) return false;
   if (paraspinal(s, x, y)) return false;
@@ -714,7 +729,8 @@ Tissue Model::abdomen(const SliceContext& s, const RowContext& r, double x) cons
     return std::nullopt;
   };
   for (int i = 0; i < 2; ++i)
-    if (auto t = organ(a_.kidneys[std::size_t(i)], s.kidney_q[std::size_t(i)], hu::kidney)) return *t;
+    if (auto t = organ(a_.kidneys[std::size_t(i)], s.kidney_q[std::size_t(i)], hu::kidney))
+      return *t;
   if (s.stomach_q < kEllipsoidMarginQ) {
     const double q = a_.stomach.q_plane(x, y) + s.stomach_q;
     // Supine: gas rises to the anterior part of the lumen.
@@ -728,13 +744,15 @@ Tissue Model::abdomen(const SliceContext& s, const RowContext& r, double x) cons
   if (gb != -1 && liver(s, x, y)) return Tissue{hu::liver, Label::liver};
   if (s.psoas_r > 0.0) {
     const double px = std::abs(x) - (s.vb_r + 0.6 * s.psoas_r + 4.0);
-    if (sq(px / s.psoas_r) + sq((y - s.vb_y - 2.0) / (1.2 * s.psoas_r)) < 1.0) return body(hu::muscle);
+    if (sq(px / s.psoas_r) + sq((y - s.vb_y - 2.0) / (1.2 * s.psoas_r)) < 1.0)
+      return body(hu::muscle);
   }
   // Bowel loops in the left and lower abdomen. They fade out toward the gallbladder, whose
   // free wall usually faces fat; raising the threshold smoothly avoids a seam.
   const double sparse = 1.2 * smoothstep(15.0, -10.0, x) * (1.0 - smoothstep(390.0, 420.0, s.d));
-  const double loops = std::sin(0.11 * x + 1.3 * std::sin(0.05 * s.d)) * std::sin(0.1 * y + 0.04 * x) +
-                       0.45 * std::sin(0.09 * s.d + 0.05 * x - 0.04 * y);
+  const double loops =
+      std::sin(0.11 * x + 1.3 * std::sin(0.05 * s.d)) * std::sin(0.1 * y + 0.04 * x) +
+      0.45 * std::sin(0.09 * s.d + 0.05 * x - 0.04 * y);
   return body(loops > 0.35 + sparse ? hu::bowel : hu::fat);
 }
 
@@ -758,10 +776,13 @@ Tissue Model::classify(const SliceContext& s, const RowContext& r, double x) con
     return body(hu::muscle);
   }
   // Tubular viscera running through the whole trunk.
-  if (sq((x - s.esophagus_x) / 9.0) + sq((y - s.esophagus_y) / 6.5) < 1.0) return body(hu::soft_tissue);
-  const double aorta = s.aorta_count > 0 ? aorta_excess(s, p) : std::numeric_limits<double>::infinity();
+  if (sq((x - s.esophagus_x) / 9.0) + sq((y - s.esophagus_y) / 6.5) < 1.0)
+    return body(hu::soft_tissue);
+  const double aorta =
+      s.aorta_count > 0 ? aorta_excess(s, p) : std::numeric_limits<double>::infinity();
   if (aorta < 0.0) return body(hu::blood);
-  if (s.ivc && std::abs(x - a_.ivc.a.x) < 15.0 && std::abs(y - a_.ivc.a.y) < 15.0 && a_.ivc.excess(p) < 0.0)
+  if (s.ivc && std::abs(x - a_.ivc.a.x) < 15.0 && std::abs(y - a_.ivc.a.y) < 15.0 &&
+      a_.ivc.excess(p) < 0.0)
     return body(hu::blood);
 
   const double diaphragm = diaphragm_d(x, y);
@@ -772,15 +793,19 @@ Tissue Model::classify(const SliceContext& s, const RowContext& r, double x) con
 
 V3 Model::preferred_seed(Label organ) const {
   switch (organ) {
-    case Label::gallbladder: return a_.gb_neck + (0.6 * a_.gb_centre_distance()) * a_.gb_axis;
+    case Label::gallbladder:
+      return a_.gb_neck + (0.6 * a_.gb_centre_distance()) * a_.gb_axis;
     case Label::trachea: {
       const double d = 0.5 * a_.carina_d;
       const auto [x, y] = trachea_centre(a_, d);
       return {x, y, d};
     }
-    case Label::liver: return {-85.0, 5.0, 335.0};
-    case Label::lungs: return {-85.0, 10.0, 200.0};
-    default: return {0.0, 0.0, 0.0};
+    case Label::liver:
+      return {-85.0, 5.0, 335.0};
+    case Label::lungs:
+      return {-85.0, 10.0, 200.0};
+    default:
+      return {0.0, 0.0, 0.0};
   }
 }
 
@@ -794,12 +819,15 @@ void validate(const PhantomOptions& o) {
                      "two slices, blur_mm ≥ 0, noise_hu ≥ 0");
   };
   if (o.size_vox < 16 || o.size_vox > 4096) bad("size_vox = " + std::to_string(o.size_vox));
-  if (!(o.slice_mm > 0.0) || !std::isfinite(o.slice_mm)) bad("slice_mm = " + std::to_string(o.slice_mm));
+  if (!(o.slice_mm > 0.0) || !std::isfinite(o.slice_mm))
+    bad("slice_mm = " + std::to_string(o.slice_mm));
   if (!(o.fov_mm > 0.0) || !std::isfinite(o.fov_mm)) bad("fov_mm = " + std::to_string(o.fov_mm));
   if (!(o.extent_mm >= 100.0) || !std::isfinite(o.extent_mm) || o.extent_mm < 2.0 * o.slice_mm)
     bad("extent_mm = " + std::to_string(o.extent_mm));
-  if (!(o.blur_mm >= 0.0) || !std::isfinite(o.blur_mm)) bad("blur_mm = " + std::to_string(o.blur_mm));
-  if (!(o.noise_hu >= 0.0) || !std::isfinite(o.noise_hu)) bad("noise_hu = " + std::to_string(o.noise_hu));
+  if (!(o.blur_mm >= 0.0) || !std::isfinite(o.blur_mm))
+    bad("blur_mm = " + std::to_string(o.blur_mm));
+  if (!(o.noise_hu >= 0.0) || !std::isfinite(o.noise_hu))
+    bad("noise_hu = " + std::to_string(o.noise_hu));
 }
 
 ImageGrid make_grid(const PhantomOptions& o) {
@@ -831,7 +859,8 @@ std::vector<float> gaussian_taps(double sigma_vox) {
   const int radius = int(std::ceil(3.0 * sigma_vox));
   std::vector<double> w(std::size_t(2 * radius + 1));
   double sum = 0.0;
-  for (int t = -radius; t <= radius; ++t) sum += w[std::size_t(t + radius)] = std::exp(-0.5 * sq(t / sigma_vox));
+  for (int t = -radius; t <= radius; ++t)
+    sum += w[std::size_t(t + radius)] = std::exp(-0.5 * sq(t / sigma_vox));
   std::vector<float> taps(w.size());
   for (std::size_t i = 0; i < w.size(); ++i) taps[i] = float(w[i] / sum);
   return taps;
@@ -845,7 +874,8 @@ void blur_rows(float* slice, std::int64_t nx, std::int64_t ny, const std::vector
   float* padded = scratch.data();
   for (std::int64_t j = 0; j < ny; ++j) {
     float* row = slice + j * nx;
-    for (std::int64_t t = 0; t < nx + 2 * radius; ++t) padded[t] = row[std::clamp<std::int64_t>(t - radius, 0, nx - 1)];
+    for (std::int64_t t = 0; t < nx + 2 * radius; ++t)
+      padded[t] = row[std::clamp<std::int64_t>(t - radius, 0, nx - 1)];
     std::fill(row, row + nx, 0.0f);
     // Taps outside, voxels inside: the inner loop is contiguous and vectorises.
     for (std::size_t w = 0; w < taps.size(); ++w) {
@@ -899,30 +929,34 @@ void synthesize_slices(const Model& model, Volume& ct, LabelMap& truth, Progress
   const ImageGrid& g = ct.grid;
   const std::int64_t nx = g.size_vox[0], ny = g.size_vox[1], nz = g.size_vox[2];
   PhaseProgress phase(progress, 0, 4, nz);
-  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const tbb::blocked_range<std::int64_t>& range) {
-    for (std::int64_t k = range.begin(); k < range.end(); ++k) {
-      const SliceContext s = make_slice(model.anatomy(), slice_depth(g, k));
-      for (std::int64_t j = 0; j < ny; ++j) {
-        const RowContext r = make_row(s, g.origin_lps_mm.y() + double(j) * g.spacing_mm.y());
-        float* hu_row = ct.hu.data() + g.offset(0, j, k);
-        std::uint8_t* label_row = truth.labels.data() + g.offset(0, j, k);
-        // Air outside the body needs no classification: only the columns the body can reach
-        // (plus one for rounding) go through classify(). Labels are already 0.
-        std::fill(hu_row, hu_row + nx, hu::air);
-        const double half_width = r.half_width[kBody];
-        if (half_width < 0.0) continue;
-        const double x0 = g.origin_lps_mm.x(), dx = g.spacing_mm.x();
-        const std::int64_t i0 = std::max<std::int64_t>(0, std::int64_t(std::floor((-half_width - x0) / dx)) - 1);
-        const std::int64_t i1 = std::min<std::int64_t>(nx, std::int64_t(std::ceil((half_width - x0) / dx)) + 2);
-        for (std::int64_t i = i0; i < i1; ++i) {
-          const Tissue t = model.classify(s, r, x0 + double(i) * dx);
-          hu_row[i] = t.hu;
-          label_row[i] = std::uint8_t(t.label);
+  tbb::parallel_for(
+      tbb::blocked_range<std::int64_t>(0, nz), [&](const tbb::blocked_range<std::int64_t>& range) {
+        for (std::int64_t k = range.begin(); k < range.end(); ++k) {
+          const SliceContext s = make_slice(model.anatomy(), slice_depth(g, k));
+          for (std::int64_t j = 0; j < ny; ++j) {
+            const RowContext r = make_row(s, g.origin_lps_mm.y() + double(j) * g.spacing_mm.y());
+            float* hu_row = ct.hu.data() + g.offset(0, j, k);
+            std::uint8_t* label_row = truth.labels.data() + g.offset(0, j, k);
+            // Air outside the body needs no classification: only the columns the body can reach
+            // (plus one for rounding) go through classify().
+            std::fill(hu_row, hu_row + nx, hu::air);
+            std::fill(label_row, label_row + nx, std::uint8_t(Label::background));
+            const double half_width = r.half_width[kBody];
+            if (half_width < 0.0) continue;
+            const double x0 = g.origin_lps_mm.x(), dx = g.spacing_mm.x();
+            const std::int64_t i0 =
+                std::max<std::int64_t>(0, std::int64_t(std::floor((-half_width - x0) / dx)) - 1);
+            const std::int64_t i1 =
+                std::min<std::int64_t>(nx, std::int64_t(std::ceil((half_width - x0) / dx)) + 2);
+            for (std::int64_t i = i0; i < i1; ++i) {
+              const Tissue t = model.classify(s, r, x0 + double(i) * dx);
+              hu_row[i] = t.hu;
+              label_row[i] = std::uint8_t(t.label);
+            }
+          }
+          phase.item_done();
         }
-      }
-      phase.item_done();
-    }
-  });
+      });
 }
 
 void blur(Volume& ct, double sigma_mm, Progress& progress) {
@@ -934,28 +968,30 @@ void blur(Volume& ct, double sigma_mm, Progress& progress) {
   float* data = ct.hu.data();
   {
     PhaseProgress phase(progress, 1, 4, nz);
-    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const tbb::blocked_range<std::int64_t>& range) {
-      std::vector<float> scratch;
-      for (std::int64_t k = range.begin(); k < range.end(); ++k) {
-        float* slice = data + k * nx * ny;
-        if (taps_x.size() > 1) blur_rows(slice, nx, ny, taps_x, scratch);
-        if (taps_y.size() > 1) blur_across(slice, ny, nx, nx, taps_y, scratch);
-        phase.item_done();
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz),
+                      [&](const tbb::blocked_range<std::int64_t>& range) {
+                        std::vector<float> scratch;
+                        for (std::int64_t k = range.begin(); k < range.end(); ++k) {
+                          float* slice = data + k * nx * ny;
+                          if (taps_x.size() > 1) blur_rows(slice, nx, ny, taps_x, scratch);
+                          if (taps_y.size() > 1) blur_across(slice, ny, nx, nx, taps_y, scratch);
+                          phase.item_done();
+                        }
+                      });
   }
   PhaseProgress phase(progress, 2, 4, ny);
   if (taps_z.size() == 1) {
     for (std::int64_t j = 0; j < ny; ++j) phase.item_done();
     return;
   }
-  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, ny), [&](const tbb::blocked_range<std::int64_t>& range) {
-    std::vector<float> scratch;
-    for (std::int64_t j = range.begin(); j < range.end(); ++j) {
-      blur_across(data + j * nx, nz, nx * ny, nx, taps_z, scratch);
-      phase.item_done();
-    }
-  });
+  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, ny),
+                    [&](const tbb::blocked_range<std::int64_t>& range) {
+                      std::vector<float> scratch;
+                      for (std::int64_t j = range.begin(); j < range.end(); ++j) {
+                        blur_across(data + j * nx, nz, nx * ny, nx, taps_z, scratch);
+                        phase.item_done();
+                      }
+                    });
 }
 
 void add_noise_and_quantize(Volume& ct, double sigma_hu, std::uint64_t seed, Progress& progress) {
@@ -963,18 +999,19 @@ void add_noise_and_quantize(Volume& ct, double sigma_hu, std::uint64_t seed, Pro
   const std::int64_t per_slice = g.slice_voxel_count(), nz = g.size_vox[2];
   PhaseProgress phase(progress, 3, 4, nz);
   const Ziggurat normal;
-  tbb::parallel_for(tbb::blocked_range<std::int64_t>(0, nz), [&](const tbb::blocked_range<std::int64_t>& range) {
-    for (std::int64_t k = range.begin(); k < range.end(); ++k) {
-      SplitMix64 rng(mix64(seed * 0x9E3779B97F4A7C15ULL + std::uint64_t(k)) ^ 0xC7A5EEDULL);
-      float* v = ct.hu.data() + k * per_slice;
-      for (std::int64_t n = 0; n < per_slice; ++n) {
-        const double noisy = sigma_hu > 0.0 ? v[n] + sigma_hu * normal.draw(rng) : double(v[n]);
-        // Integral HU, so that writing int16 DICOM is lossless.
-        v[n] = std::clamp(float(std::nearbyint(noisy)), hu::min, hu::max);
-      }
-      phase.item_done();
-    }
-  });
+  tbb::parallel_for(
+      tbb::blocked_range<std::int64_t>(0, nz), [&](const tbb::blocked_range<std::int64_t>& range) {
+        for (std::int64_t k = range.begin(); k < range.end(); ++k) {
+          SplitMix64 rng(mix64(seed * 0x9E3779B97F4A7C15ULL + std::uint64_t(k)) ^ 0xC7A5EEDULL);
+          float* v = ct.hu.data() + k * per_slice;
+          for (std::int64_t n = 0; n < per_slice; ++n) {
+            const double noisy = sigma_hu > 0.0 ? v[n] + sigma_hu * normal.draw(rng) : double(v[n]);
+            // Integral HU, so that writing int16 DICOM is lossless.
+            v[n] = std::clamp(float(std::nearbyint(noisy)), hu::min, hu::max);
+          }
+          phase.item_done();
+        }
+      });
 }
 
 /// The seed of `organ`: the voxel centre nearest to `preferred_lps_mm` among voxels of the
@@ -989,8 +1026,10 @@ std::optional<Eigen::Vector3d> find_seed(const LabelMap& truth, Label organ,
   std::array<std::int64_t, 3> lo{}, hi{};
   for (int a = 0; a < 3; ++a) {
     const double reach_vox = reach_mm / g.spacing_mm[a];
-    lo[std::size_t(a)] = std::clamp<std::int64_t>(std::int64_t(std::floor(target[a] - reach_vox)), 0, g.size_vox[std::size_t(a)]);
-    hi[std::size_t(a)] = std::clamp<std::int64_t>(std::int64_t(std::ceil(target[a] + reach_vox)) + 1, 0, g.size_vox[std::size_t(a)]);
+    lo[std::size_t(a)] = std::clamp<std::int64_t>(std::int64_t(std::floor(target[a] - reach_vox)),
+                                                  0, g.size_vox[std::size_t(a)]);
+    hi[std::size_t(a)] = std::clamp<std::int64_t>(
+        std::int64_t(std::ceil(target[a] + reach_vox)) + 1, 0, g.size_vox[std::size_t(a)]);
   }
   const auto same = [&](std::int64_t i, std::int64_t j, std::int64_t k) {
     return g.contains(i, j, k) && truth.at(i, j, k) == value;
@@ -1005,7 +1044,8 @@ std::optional<Eigen::Vector3d> find_seed(const LabelMap& truth, Label organ,
     for (std::int64_t j = lo[1]; j < hi[1]; ++j)
       for (std::int64_t i = lo[0]; i < hi[0]; ++i) {
         if (truth.at(i, j, k) != value) continue;
-        const Eigen::Vector3d delta_mm = g.spacing_mm.cwiseProduct(Eigen::Vector3d(double(i), double(j), double(k)) - target);
+        const Eigen::Vector3d delta_mm =
+            g.spacing_mm.cwiseProduct(Eigen::Vector3d(double(i), double(j), double(k)) - target);
         const double d2 = delta_mm.squaredNorm();
         const bool interior = same(i + 1, j, k) && same(i - 1, j, k) && same(i, j + 1, k) &&
                               same(i, j - 1, k) && same(i, j, k + 1) && same(i, j, k - 1);
@@ -1013,7 +1053,9 @@ std::optional<Eigen::Vector3d> find_seed(const LabelMap& truth, Label organ,
           if (d2 < best[c].d2) best[c] = {d2, {i, j, k}};
       }
   for (const Best& b : best)
-    if (b.ijk[0] >= 0) return g.index_to_lps_mm(Eigen::Vector3d(double(b.ijk[0]), double(b.ijk[1]), double(b.ijk[2])));
+    if (b.ijk[0] >= 0)
+      return g.index_to_lps_mm(
+          Eigen::Vector3d(double(b.ijk[0]), double(b.ijk[1]), double(b.ijk[2])));
   return std::nullopt;
 }
 
@@ -1021,12 +1063,14 @@ std::optional<Eigen::Vector3d> find_seed(const LabelMap& truth, Label organ,
 
 Phantom synthesize_phantom(const PhantomOptions& options, Progress& progress) {
   validate(options);
+  progress.check_cancelled();
   Phantom out;
   const ImageGrid grid = make_grid(options);
   out.ct.grid = grid;
   out.truth.grid = grid;
-  out.ct.hu.assign(std::size_t(grid.voxel_count()), 0.0f);
-  out.truth.labels.assign(std::size_t(grid.voxel_count()), 0);
+  // Not zeroed (VoxelBuffer): synthesize_slices writes every voxel, on the worker threads.
+  out.ct.hu.resize(std::size_t(grid.voxel_count()));
+  out.truth.labels.resize(std::size_t(grid.voxel_count()));
 
   const Model model(options.seed);
   progress.report(0.0, kTask);

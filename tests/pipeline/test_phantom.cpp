@@ -75,7 +75,8 @@ std::vector<Eigen::Vector3d> positions_of(const LabelMap& truth, std::uint8_t la
     for (std::int64_t j = 0; j < n[1]; ++j)
       for (std::int64_t i = 0; i < n[0]; ++i)
         if (truth.at(i, j, k) == label)
-          points.push_back(truth.grid.index_to_lps_mm(Eigen::Vector3d(double(i), double(j), double(k))));
+          points.push_back(
+              truth.grid.index_to_lps_mm(Eigen::Vector3d(double(i), double(j), double(k))));
   return points;
 }
 
@@ -94,7 +95,8 @@ std::int64_t count_in_slice(const LabelMap& truth, std::uint8_t label, std::int6
 /// Label at the voxel nearest to an LPS point (255 outside the grid).
 std::uint8_t label_at(const LabelMap& truth, const Eigen::Vector3d& p_lps_mm) {
   const Eigen::Vector3d ijk = truth.grid.lps_mm_to_index(p_lps_mm);
-  const std::int64_t i = std::llround(ijk.x()), j = std::llround(ijk.y()), k = std::llround(ijk.z());
+  const std::int64_t i = std::llround(ijk.x()), j = std::llround(ijk.y()),
+                     k = std::llround(ijk.z());
   return truth.grid.contains(i, j, k) ? truth.at(i, j, k) : 255;
 }
 
@@ -174,7 +176,8 @@ TEST(Phantom, BodyContainsBoneFatAndMuscle) {
   const std::vector<float> body = hu_of(small_phantom(), kBody);
   ASSERT_FALSE(body.empty());
   const auto fraction = [&](float lo, float hi) {
-    return double(std::count_if(body.begin(), body.end(), [&](float v) { return v >= lo && v <= hi; })) /
+    return double(std::count_if(body.begin(), body.end(),
+                                [&](float v) { return v >= lo && v <= hi; })) /
            double(body.size());
   };
   EXPECT_GT(fraction(300.0f, 3071.0f), 0.005) << "bone (> 300 HU)";
@@ -204,7 +207,9 @@ TEST(Phantom, NoiseHasTheRequestedStandardDeviation) {
   for (double v : values) var += (v - mean) * (v - mean);
   const double sd = std::sqrt(var / double(values.size() - 1));
   const double requested = small_options().noise_hu;
-  EXPECT_NEAR(sd, requested, 0.3 * requested);
+  // The spec allows ±30 %; 10 % still leaves room for sampling error (n > 1000) and catches
+  // noise added before the blur, which would smooth it to ~85 % even on this coarse grid.
+  EXPECT_NEAR(sd, requested, 0.1 * requested);
   EXPECT_NEAR(mean, 60.0, 2.0);
 }
 
@@ -218,8 +223,9 @@ TEST(Phantom, TruthIsTheNoiseFreeUnblurredMembership) {
   for (float v : hu_of(c, kLiver)) ASSERT_EQ(v, 60.0f);
   for (float v : hu_of(c, kGallbladder)) ASSERT_EQ(v, 10.0f);
   for (float v : hu_of(c, kTrachea)) ASSERT_EQ(v, -1000.0f);
-  for (float v : hu_of(c, kLungs)) ASSERT_TRUE(v == -850.0f || v == -1000.0f || v == 50.0f)  // parenchyma, bronchi
-      << v;
+  for (float v : hu_of(c, kLungs))
+    ASSERT_TRUE(v == -850.0f || v == -1000.0f || v == 50.0f)  // parenchyma, bronchi
+        << v;
 }
 
 // --- Sizes and placement --------------------------------------------------------------------
@@ -260,8 +266,9 @@ TEST(Phantom, GallbladderTouchesTheLiverOnThePatientsRightWithFundusAnteriorInfe
     for (std::int64_t j = 1; j + 1 < n[1]; ++j)
       for (std::int64_t i = 1; i + 1 < n[0]; ++i)
         if (t.at(i, j, k) == kGallbladder)
-          contacts += t.at(i + 1, j, k) == kLiver || t.at(i - 1, j, k) == kLiver || t.at(i, j + 1, k) == kLiver ||
-                      t.at(i, j - 1, k) == kLiver || t.at(i, j, k + 1) == kLiver || t.at(i, j, k - 1) == kLiver;
+          contacts += t.at(i + 1, j, k) == kLiver || t.at(i - 1, j, k) == kLiver ||
+                      t.at(i, j + 1, k) == kLiver || t.at(i, j - 1, k) == kLiver ||
+                      t.at(i, j, k + 1) == kLiver || t.at(i, j, k - 1) == kLiver;
   EXPECT_GT(contacts, 5);
 
   auto points = positions_of(t, kGallbladder);
@@ -271,7 +278,8 @@ TEST(Phantom, GallbladderTouchesTheLiverOnThePatientsRightWithFundusAnteriorInfe
   EXPECT_LT(gallbladder.x(), 0.0);
   EXPECT_LT(gallbladder.y(), liver.y()) << "gallbladder anterior to the liver's centre";
   // The lowest fifth of the gallbladder (fundus) lies anterior to its highest fifth (neck).
-  std::sort(points.begin(), points.end(), [](const auto& a, const auto& b) { return a.z() < b.z(); });
+  std::sort(points.begin(), points.end(),
+            [](const auto& a, const auto& b) { return a.z() < b.z(); });
   const std::size_t fifth = points.size() / 5;
   const std::vector<Eigen::Vector3d> fundus(points.begin(), points.begin() + std::ptrdiff_t(fifth));
   const std::vector<Eigen::Vector3d> neck(points.end() - std::ptrdiff_t(fifth), points.end());
@@ -290,7 +298,8 @@ TEST(Phantom, LiverLiesUnderTheRightDomeOfTheDiaphragm) {
         bool lung_above = false;
         for (std::int64_t kk = k + 1; kk < n[2]; ++kk) lung_above |= t.at(i, j, kk) == kLungs;
         EXPECT_TRUE(lung_above) << "liver dome at (" << i << ", " << j << ", " << k << ")";
-        EXPECT_LT(t.grid.index_to_lps_mm(Eigen::Vector3d(double(i), double(j), double(k))).x(), 0.0);
+        EXPECT_LT(t.grid.index_to_lps_mm(Eigen::Vector3d(double(i), double(j), double(k))).x(),
+                  0.0);
         return;
       }
   }
@@ -319,7 +328,8 @@ TEST(Phantom, TracheaRunsFromTheTopSliceToACarinaAtMidLungs) {
   // Contiguous from the top down to the carina, absent below.
   std::int64_t carina = nz - 1;
   while (carina > 0 && count_in_slice(t, kTrachea, carina - 1) > 0) --carina;
-  for (std::int64_t k = 0; k < carina; ++k) EXPECT_EQ(count_in_slice(t, kTrachea, k), 0) << "slice " << k;
+  for (std::int64_t k = 0; k < carina; ++k)
+    EXPECT_EQ(count_in_slice(t, kTrachea, k), 0) << "slice " << k;
   EXPECT_GT(carina, nz / 2) << "the trachea ends in the upper half";
 
   std::int64_t lung_top = -1, lung_bottom = -1;
@@ -339,9 +349,10 @@ TEST(Phantom, TracheaRunsFromTheTopSliceToACarinaAtMidLungs) {
   for (std::int64_t j = 0; j < n[1]; ++j)
     for (std::int64_t i = 0; i < n[0]; ++i) {
       const std::int64_t k = carina - 2;
-      const Eigen::Vector3d p = t.grid.index_to_lps_mm(Eigen::Vector3d(double(i), double(j), double(k)));
-      if (t.at(i, j, k) == kLungs && std::abs(p.x()) < 45.0 && small_phantom().ct.at(i, j, k) < -900.0f &&
-          std::abs(p.y()) < 40.0)
+      const Eigen::Vector3d p =
+          t.grid.index_to_lps_mm(Eigen::Vector3d(double(i), double(j), double(k)));
+      if (t.at(i, j, k) == kLungs && std::abs(p.x()) < 45.0 &&
+          small_phantom().ct.at(i, j, k) < -900.0f && std::abs(p.y()) < 40.0)
         (p.x() < 0.0 ? right : left) += 1;
     }
   EXPECT_GT(right, 0);
@@ -364,6 +375,10 @@ TEST(Phantom, SeedsLieInsideTheirOrgans) {
         step[a] = sign * p.truth.grid.spacing_mm[a];
         EXPECT_EQ(label_at(p.truth, seed + step), label) << name << " axis " << a;
       }
+    // Near the middle of single-piece organs (the two lungs have their centroid between them).
+    if (label != kLungs) {
+      EXPECT_LT((seed - centroid(positions_of(p.truth, label))).norm(), 30.0) << name;
+    }
   }
 }
 
@@ -380,7 +395,8 @@ TEST(Phantom, ShortAndLongExtentsKeepEveryOrganAndItsSeed) {
     for (std::uint8_t label : {kGallbladder, kTrachea, kLiver, kLungs, kBody})
       EXPECT_GT(p.truth.count(label), 0) << "label " << int(label) << " at extent " << extent_mm;
     EXPECT_EQ(p.seeds_lps_mm.size(), 4u) << "extent " << extent_mm;
-    EXPECT_GT(count_in_slice(p.truth, kTrachea, p.ct.grid.size_vox[2] - 1), 0) << "extent " << extent_mm;
+    EXPECT_GT(count_in_slice(p.truth, kTrachea, p.ct.grid.size_vox[2] - 1), 0)
+        << "extent " << extent_mm;
   }
 }
 
