@@ -5,13 +5,16 @@
 #include "organsmith_version.h"  // generated at build time: version and git commit
 #include "pipeline/ingest.h"
 #include "pipeline/phantom.h"
+#include "pipeline/image_io.h"
 #include "pipeline/phantom_files.h"
+#include "segmentation/segment.h"
 
 #include <spdlog/spdlog.h>
 
 #include <chrono>
 #include <fstream>
 #include <functional>
+#include <optional>
 #include <random>
 #include <sstream>
 
@@ -149,16 +152,77 @@ class Runner {
                }});
       input = out_ / "phantom" / "dicom";
     }
+    input_ = input;
     const nlohmann::json ingest_opts = to_json(case_)["ingest"];
     const std::string organs = to_json(case_)["organs"].dump();
     execute({"ingest", fingerprint("ingest", ingest_opts.dump() + organs + input_stat_digest(input)),
-             [&, input](const fs::path& staging) { write_ingest(input, staging); }});
+             [&](const fs::path& staging) { write_ingest(staging); }});
+
+    if (!case_.organs.empty()) {
+      const nlohmann::json seg_opts = case_.other_stages.value("segment", nlohmann::json::object());
+      execute({"segment", fingerprint("segment", seg_opts.dump() + outputs_digest("ingest")),
+               [&](const fs::path& staging) { write_segmentation(staging); }});
+    }
+  }
+
+  /// The ingested volume: kept from the ingest stage, or read again when that stage was reused.
+  const Volume& volume() {
+    if (!volume_) {
+      spdlog::info("reading the input again for the stages that need it");
+      volume_ = ingest(input_, case_.ingest, progress_).volume;
+    }
+    return *volume_;
+  }
+
+  /// Digest of the files a stage of this run produced (or reused): what later stages depend on.
+  std::string outputs_digest(const std::string& stage) const {
+    for (const auto& r : records_)
+      if (r.name == stage) {
+        std::string all;
+        for (const auto& o : r.outputs) all += o.value("sha256", "") + "\n";
+        return sha256_hex(all);
+      }
+    return {};
+  }
+
+  /// segment writes labels.nii.gz (input grid), contours_<organ>.json and overlays/*.png.
+  void write_segmentation(const fs::path& staging) {
+    std::ifstream in(out_ / "ingest.json");
+    const nlohmann::json ingest_json = nlohmann::json::parse(in);
+    std::vector<OrganRequest> requests;
+    for (const auto& o : ingest_json.at("organs")) {
+      OrganRequest r;
+      r.organ = o.at("name").get<std::string>();
+      if (o.contains("seed_lps_mm"))
+        r.seed_lps_mm = Eigen::Vector3d(o["seed_lps_mm"][0].get<double>(), o["seed_lps_mm"][1].get<double>(),
+                                        o["seed_lps_mm"][2].get<double>());
+      // The trachea is always found automatically; a phantom seed is only a hint for reviewers.
+      if (r.organ == "trachea" && !case_has_seed(r.organ)) r.seed_lps_mm.reset();
+      requests.push_back(std::move(r));
+    }
+    SegmentOptions options;
+    const SegmentationResult result = segment_organs(volume(), requests, options, progress_);
+    write_label_map(result.labels, staging / "labels.nii.gz");
+    for (const auto& organ : result.organs) {
+      write_text_atomic(staging / ("contours_" + organ.organ + ".json"), contours_json(organ));
+      spdlog::info("segment: {} {:.1f} ml on slices {}–{}", organ.organ, organ.volume_ml, organ.first_slice,
+                   organ.last_slice);
+      for (const auto& note : organ.notes) spdlog::info("segment: {}: {}", organ.organ, note);
+    }
+    fs::create_directories(staging / "overlays");
+    write_overlays(volume(), result, staging / "overlays");
+  }
+
+  bool case_has_seed(const std::string& organ) const {
+    for (const auto& o : case_.organs)
+      if (o.name == organ) return o.seed_lps_mm.has_value() || o.seed_ijk.has_value();
+    return false;
   }
 
   /// Ingest writes ingest.json: what was read, its geometry and digest, and the organ seeds
   /// resolved to LPS mm.
-  void write_ingest(const fs::path& input, const fs::path& staging) {
-    IngestResult r = ingest(input, case_.ingest, progress_);
+  void write_ingest(const fs::path& staging) {
+    IngestResult r = ingest(input_, case_.ingest, progress_);
     for (const auto& w : r.report.warnings) spdlog::warn("ingest: {}", w);
     input_digest_ = volume_digest(r.volume);
     nlohmann::json j;
@@ -179,6 +243,7 @@ class Runner {
     j["organs"] = resolve_seeds(r.volume.grid);
     input_json_ = {{"format", j["format"]}, {"digest_sha256", input_digest_}, {"grid", j["grid"]}};
     write_text_atomic(staging / "ingest.json", j.dump(2) + "\n");
+    volume_ = std::move(r.volume);
   }
 
   nlohmann::json resolve_seeds(const ImageGrid& grid) {
@@ -287,6 +352,8 @@ class Runner {
   nlohmann::json previous_;
   std::vector<StageRecord> records_;
   std::string input_digest_;
+  fs::path input_;
+  std::optional<Volume> volume_;
   nlohmann::json input_json_ = nlohmann::json::object();
 };
 

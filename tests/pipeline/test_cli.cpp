@@ -199,7 +199,10 @@ TEST(Cli, RunWritesManifestAndReusesUnchangedStages) {
   EXPECT_FALSE(m1["tool"]["git_commit"].get<std::string>().empty());
   EXPECT_EQ(m1["input"]["digest_sha256"].get<std::string>().size(), 64u);
   EXPECT_EQ(m1["case"]["phantom"]["size_vox"], 64);
-  ASSERT_EQ(m1["stages"].size(), 2u);
+  ASSERT_EQ(m1["stages"].size(), 3u);
+  EXPECT_EQ(m1["stages"][0]["name"], "phantom");
+  EXPECT_EQ(m1["stages"][1]["name"], "ingest");
+  EXPECT_EQ(m1["stages"][2]["name"], "segment");
   for (const auto& st : m1["stages"]) {
     EXPECT_EQ(st["status"], "ran");
     EXPECT_GT(st["peak_rss_mib"].get<double>(), 0.0);
