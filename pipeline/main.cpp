@@ -150,7 +150,8 @@ void list_written(const RunSummary& summary) {
   std::cout << "  manifest.json\n";
 }
 
-int cmd_run(const std::string& case_path, const std::string& out, bool force, const IngestFlags& flags) {
+int cmd_run(const std::string& case_path, const std::string& out, bool force, const std::string& until,
+            const IngestFlags& flags) {
   CaseFile c = case_path.empty() ? default_case() : load_case_file(case_path);
   if (!out.empty()) c.out_dir = out;
   flags.apply(c.ingest);
@@ -159,6 +160,7 @@ int cmd_run(const std::string& case_path, const std::string& out, bool force, co
   TerminalProgress progress;
   RunOptions options;
   options.force = force;
+  options.until = until;
   const RunSummary summary = run_case(c, options, progress);
   progress.finish();
   list_written(summary);
@@ -208,7 +210,7 @@ int main(int argc, char** argv) {
   phantom->add_option("--extent-mm", phantom_options.extent_mm, "cranio-caudal extent in mm (default 400)")->check(CLI::Range(100.0, 2000.0));
 
   // run
-  std::string case_path, run_out;
+  std::string case_path, run_out, until;
   bool force = false, print_default = false;
   IngestFlags run_flags;
   auto* run = app.add_subcommand("run", "Run every stage of a case (TOML). Without a case file, runs the embedded\n"
@@ -217,6 +219,7 @@ int main(int argc, char** argv) {
   run->add_option("CASE", case_path, "case file (see README.md, 'Case file')")->check(CLI::ExistingFile);
   run->add_option("--out", run_out, "output directory (overrides the case's [output] dir)");
   run->add_flag("--force", force, "redo every stage even when unchanged");
+  run->add_option("--until", until, "stop after this stage (phantom, ingest, segment, …)");
   run->add_flag("--print-default-case", print_default, "print the embedded default case and exit");
   run_flags.add_to(run);
 
@@ -244,7 +247,7 @@ int main(int argc, char** argv) {
         std::cout << default_case_text();
         return 0;
       }
-      return cmd_run(case_path, run_out, force, run_flags);
+      return cmd_run(case_path, run_out, force, until, run_flags);
     }
     for (const auto& c : commands)
       if (c.sub->parsed()) return c.run();

@@ -284,6 +284,8 @@ class Runner {
   }
 
   void execute(const Stage& stage) {
+    if (done_) return;
+    done_ = stage.name == options_.until;
     progress_.check_cancelled();
     StageRecord rec;
     rec.name = stage.name;
@@ -354,6 +356,7 @@ class Runner {
   std::string input_digest_;
   fs::path input_;
   std::optional<Volume> volume_;
+  bool done_ = false;  // set once the --until stage has run
   nlohmann::json input_json_ = nlohmann::json::object();
 };
 
@@ -407,7 +410,18 @@ void write_text_atomic(const fs::path& path, const std::string& text) {
   if (ec) throw OutputError("cannot move the file into place: " + ec.message(), path);
 }
 
+const std::vector<std::string>& stage_names() {
+  static const std::vector<std::string> names = {"phantom", "ingest", "segment"};
+  return names;
+}
+
 RunSummary run_case(const CaseFile& c, const RunOptions& options, Progress& progress) {
+  const auto& names = stage_names();
+  if (!options.until.empty() && std::find(names.begin(), names.end(), options.until) == names.end()) {
+    std::string list;
+    for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+    throw UsageError("unknown stage '" + options.until + "'", "stages: " + list);
+  }
   return Runner(c, options, progress).run();
 }
 

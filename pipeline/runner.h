@@ -16,7 +16,11 @@ namespace organsmith {
 
 struct RunOptions {
   bool force = false;  ///< rerun every stage even when its fingerprint is unchanged
+  std::string until;   ///< stop after this stage (empty = run all); see `stage_names()`
 };
+
+/// The stages of `organsmith run`, in order (the phantom stage only runs for input = "phantom").
+const std::vector<std::string>& stage_names();
 
 /// What happened to one stage.
 struct StageRecord {

