@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <cctype>
 #include <charconv>
 #include <chrono>
 #include <cmath>
@@ -226,6 +227,14 @@ FitStatistics fit_statistics(std::span<const double> measured, std::span<const d
   return s;
 }
 
+void use_relative_residuals(CalibrationData& d, double floor_fraction) {
+  double ymax = 0;
+  for (double y : d.measured) ymax = std::max(ymax, std::abs(y));
+  const double floor = std::max(floor_fraction * ymax, std::numeric_limits<double>::min());
+  d.weight.clear();
+  for (double y : d.measured) d.weight.push_back(1.0 / std::max(std::abs(y), floor));
+}
+
 // ---- random numbers ------------------------------------------------------------------------------
 
 Rng::Rng(std::uint64_t seed) {
@@ -305,14 +314,17 @@ double sse_of(const Model& m, const CalibrationData& d, std::span<const double> 
   scratch.resize(d.points.size());
   m.respond(d.points, p, scratch);
   double s = 0;
+  const bool w = !d.weight.empty();
   for (std::size_t i = 0; i < scratch.size(); ++i) {
-    const double r = scratch[i] - d.measured[i];
+    const double r = (scratch[i] - d.measured[i]) * (w ? d.weight[i] : 1.0);
     s += r * r;
   }
   return std::isfinite(s) ? s : kInf;
 }
 
 void check_inputs(const Model& m, const CalibrationData& d) {
+  if (!d.weight.empty() && d.weight.size() != d.points.size())
+    throw CalibrationDataError("weights and points differ in number", d.source);
   if (d.points.size() != d.measured.size())
     throw CalibrationDataError("points and measurements differ in number", d.source);
   if (d.points.size() < m.parameter_count() + 1)
@@ -345,8 +357,9 @@ int lm_run(const Model& m, const CalibrationData& d, std::vector<double>& p,
     Eigen::MatrixXd J(N, n);
     Eigen::VectorXd r(N);
     for (std::size_t i = 0; i < N; ++i) {
-      r[i] = f[i] - d.measured[i];
-      for (std::size_t j = 0; j < n; ++j) J(i, j) = jac[i * n + j] * scale[j];
+      const double w = d.weight.empty() ? 1.0 : d.weight[i];
+      r[i] = w * (f[i] - d.measured[i]);
+      for (std::size_t j = 0; j < n; ++j) J(i, j) = w * jac[i * n + j] * scale[j];
     }
     if (!J.allFinite()) break;
     const Eigen::MatrixXd A = J.transpose() * J;
@@ -383,6 +396,35 @@ int lm_run(const Model& m, const CalibrationData& d, std::vector<double>& p,
 
 }  // namespace
 
+std::vector<double> standard_errors(const Model& m, const CalibrationData& d, std::span<const double> p) {
+  const std::size_t n = p.size(), N = d.points.size();
+  std::vector<double> f(N), jac(N * n);
+  m.respond(d.points, p, f, jac);
+  Eigen::MatrixXd J(N, n);
+  double sse = 0;
+  for (std::size_t i = 0; i < N; ++i) {
+    sse += (f[i] - d.measured[i]) * (f[i] - d.measured[i]);
+    for (std::size_t j = 0; j < n; ++j) J(i, j) = jac[i * n + j];
+  }
+  std::vector<double> se(n, kInf);
+  if (N <= n || !J.allFinite()) return se;
+  const double s2 = sse / static_cast<double>(N - n);
+  // Columns scaled to unit norm so that the rank decision does not depend on parameter units.
+  Eigen::VectorXd norm = J.colwise().norm().transpose();
+  for (std::size_t j = 0; j < n; ++j)
+    if (norm[j] > 0) J.col(j) /= norm[j];
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(J, Eigen::ComputeThinV);
+  const Eigen::VectorXd s = svd.singularValues();
+  if (s[s.size() - 1] <= 1e-10 * s[0]) return se;   // a direction the data do not see
+  const Eigen::MatrixXd V = svd.matrixV();
+  for (std::size_t j = 0; j < n; ++j) {
+    double v = 0;
+    for (Eigen::Index k = 0; k < s.size(); ++k) v += std::pow(V(static_cast<Eigen::Index>(j), k) / s[k], 2);
+    se[j] = norm[j] > 0 ? std::sqrt(s2 * v) / norm[j] : kInf;
+  }
+  return se;
+}
+
 FitResult least_squares(const Model& m, const CalibrationData& d, std::vector<double> start,
                         const std::vector<double>& lo_in, const std::vector<double>& hi_in,
                         const LmOptions& o) {
@@ -400,6 +442,7 @@ FitResult least_squares(const Model& m, const CalibrationData& d, std::vector<do
   r.predicted.resize(d.points.size());
   m.respond(d.points, r.parameters, r.predicted);
   r.stats = fit_statistics(d.measured, r.predicted);
+  r.standard_errors = standard_errors(m, d, r.parameters);
   r.ga_sse = r.stats.sse;
   r.seconds = since(t0);
   return r;
@@ -446,12 +489,13 @@ FitResult calibrate(const Model& m, const CalibrationData& d, const FitOptions& 
   std::vector<double> fitness(static_cast<std::size_t>(P));
   for (double& z : pop) z = rng.uniform();
 
+  bool go_parallel = false;  // decided after timing the first generation (see below)
   auto evaluate = [&](const std::vector<double>& zs) {
     auto body = [&](int k, std::vector<double>& scratch, std::vector<double>& p) {
       for (std::size_t j = 0; j < n; ++j) p[j] = lo[j] + zs[k * n + j] * (hi[j] - lo[j]);
       fitness[static_cast<std::size_t>(k)] = sse_of(m, d, p, scratch);
     };
-    if (ga.parallel && P >= 32) {
+    if (go_parallel) {
       tbb::parallel_for(tbb::blocked_range<int>(0, P, 16), [&](const tbb::blocked_range<int>& r) {
         std::vector<double> scratch, p(n);
         for (int k = r.begin(); k < r.end(); ++k) body(k, scratch, p);
@@ -466,7 +510,13 @@ FitResult calibrate(const Model& m, const CalibrationData& d, const FitOptions& 
   const int children = P - elite;
   const int crossovers = static_cast<int>(std::lround(ga.crossover_fraction * children));
   std::vector<int> order(static_cast<std::size_t>(P)), rank(static_cast<std::size_t>(P));
+  // Fork-join costs tens of microseconds per generation and more when the other core is busy, so
+  // the population is evaluated in parallel only when a generation's work clearly exceeds that
+  // (cheap closed forms on a few dozen points stay serial; the fung-organ lateral solve does not).
+  // The choice never changes the result: every individual's fitness is computed the same way.
+  const auto t_first = std::chrono::steady_clock::now();
   evaluate(pop);
+  go_parallel = ga.parallel && P >= 32 && since(t_first) > 0.5e-3;
   for (int gen = 0; gen < ga.generations; ++gen) {
     if (progress) {
       progress->check_cancelled();
@@ -529,6 +579,7 @@ FitResult calibrate(const Model& m, const CalibrationData& d, const FitOptions& 
   r.predicted.resize(d.points.size());
   m.respond(d.points, r.parameters, r.predicted);
   r.stats = fit_statistics(d.measured, r.predicted);
+  r.standard_errors = standard_errors(m, d, r.parameters);
   r.seed = ga.seed;
   r.seconds = since(t0);
   if (progress) progress->report(1.0, "genetic algorithm");

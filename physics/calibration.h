@@ -28,7 +28,16 @@ struct CalibrationData {
   std::vector<double> measured;
   std::vector<std::string> specimen;   ///< per point; "" when the file has no specimen column
   std::filesystem::path source;        ///< where the data came from (for messages)
+  /// Optional residual weights (empty = all 1): the fit minimises Σ (w_i (f_i − y_i))². The
+  /// thesis' fitness (3.16) is unweighted; see use_relative_residuals().
+  std::vector<double> weight;
 };
+
+/// Sets weights 1/|y_i| so that the fit minimises squared relative residuals — the maximum-
+/// likelihood choice when the measurement error is proportional to the stress (load cells with a
+/// relative accuracy). |y_i| is floored at `floor_fraction` × max|y| so that points at zero load do
+/// not dominate. Fit statistics (SSE, R², RMSE) are still reported unweighted.
+void use_relative_residuals(CalibrationData& data, double floor_fraction = 0.01);
 
 /// Reads calibration data from CSV. Header (case-insensitive, any column order):
 ///   stress tests: `stretch` (1) or `strain` (1, stretch = 1 + strain), `stress_pa`, optional
@@ -67,7 +76,9 @@ struct GaOptions {
   double crossover_fraction = 0.7;
   double mutation_scale = 0.15;   ///< initial mutation σ as a fraction of each box width
   std::uint64_t seed = 1;
-  bool parallel = true;           ///< evaluate the population with TBB (results do not change)
+  /// Evaluate the population with TBB when one generation takes over 0.5 ms serially (the
+  /// result does not change either way).
+  bool parallel = true;
 };
 
 /// Levenberg–Marquardt settings (bounded by projection onto the box).
@@ -89,7 +100,10 @@ struct FitResult {
   std::vector<double> lower, upper;   ///< the box that was searched
   std::vector<double> predicted;      ///< model at the data points
   FitStatistics stats;
-  double ga_sse = 0.0;                ///< SSE of the GA's best before the polish
+  /// Asymptotic standard errors √(s² (JᵀJ)⁻¹)_jj with s² = SSE/(n − p), parameter units. Large
+  /// values (or +∞ when JᵀJ is singular) flag parameters the data cannot determine.
+  std::vector<double> standard_errors;
+  double ga_sse = 0.0;                ///< objective (weighted SSE) of the GA's best before the polish
   int lm_iterations = 0;
   double seconds = 0.0;               ///< wall time of the whole fit
   std::uint64_t seed = 0;
@@ -113,6 +127,10 @@ FitResult least_squares(const Model& model, const CalibrationData& data, std::ve
 FitResult multistart_least_squares(const Model& model, const CalibrationData& data, int starts,
                                    std::uint64_t seed, const std::vector<double>& lower,
                                    const std::vector<double>& upper, const LmOptions& options = {});
+
+/// Standard errors of `p` on `data` (see FitResult::standard_errors).
+std::vector<double> standard_errors(const Model& model, const CalibrationData& data,
+                                    std::span<const double> p);
 
 /// Small deterministic generator (SplitMix64 seeding + xoshiro256**) with its own uniform and
 /// normal draws, so results do not depend on the standard library's distribution code.

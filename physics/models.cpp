@@ -156,11 +156,33 @@ class FungModel final : public Model {
     const std::size_t n = info_.size();
     assert(p.size() == n && out.size() == points.size());
     assert(jac.empty() || jac.size() == points.size() * n);
+    const FungLocal frames[2] = {local_frame(p, organ_, K_, false), local_frame(p, organ_, K_, true)};
+    // Uniaxial wall, lateral axis free: W_x = c A1 x e^(A1 x²) with A1 = a1 − a4²/a2 in the local
+    // frame — the GA's hot path (no lateral solve, one exponential per point). Per frame:
+    // A1, c·A1 and a4/a2 (the lateral strain is −(a4/a2) x, physical while 1 − 2(a4/a2) x > 0).
+    struct Reduced {
+      double A, cA, ratio;
+      bool ok;
+    } reduced[2];
+    for (int k = 0; k < 2; ++k) {
+      const FungLocal& f = frames[k];
+      reduced[k].ratio = f.a4 / f.a2;
+      reduced[k].A = f.a1 - f.a4 * reduced[k].ratio;
+      reduced[k].cA = f.c * reduced[k].A;
+      reduced[k].ok = f.a2 > 0;
+    }
     for (std::size_t i = 0; i < points.size(); ++i) {
       const LoadPoint& pt = points[i];
       const bool theta = pt.load == LoadCase::uniaxial_circumferential ||
                          pt.load == LoadCase::biaxial_circumferential;
-      const FungLocal f = local_frame(p, organ_, K_, theta);
+      const FungLocal& f = frames[theta ? 1 : 0];
+      if (!organ_ && jac.empty() && is_uniaxial(pt.load)) {
+        const double lam = pt.x, x = 0.5 * (lam * lam - 1);
+        const Reduced& r = reduced[theta ? 1 : 0];
+        const bool ok = r.ok && 1.0 - 2.0 * r.ratio * x > 0 && lam > 0;
+        out[i] = ok ? lam * r.cA * x * std::exp(r.A * x * x) : kNaN;
+        continue;
+      }
       const double lam = pt.x;
       const double x = 0.5 * (lam * lam - 1);
       double y;
@@ -177,10 +199,20 @@ class FungModel final : public Model {
         if (!jac.empty()) std::fill_n(jac.begin() + i * n, n, kNaN);
         continue;
       }
+      if (jac.empty()) {
+        // Hot path of the GA: only W_x. Nominal stress P = ∂W/∂λ = (∂W/∂E)(dE/dλ) = λ S
+        // (thesis 5.1.8 with 5.1.16: T = σ/λ = λ S).
+        const double Q = f.a1 * x * x + f.a2 * y * y + 2 * f.a4 * x * y;
+        double Wx = f.c * std::exp(Q) * (f.a1 * x + f.a4 * y);
+        if (f.K != 0.0) {
+          const double px = 2 * x + 1, J = std::sqrt(px * (2 * y + 1));
+          Wx += vol_terms(f, J).g1 * J / px;
+        }
+        out[i] = lam * Wx;
+        continue;
+      }
       const FungDerivs d = fung_derivs(f, x, y);
-      // Nominal stress P = ∂W/∂λ = (∂W/∂E)(dE/dλ) = λ S (thesis 5.1.8 with 5.1.16: T = σ/λ = λ S).
       out[i] = lam * d.Wx;
-      if (jac.empty()) continue;
       double Wx_p[5], Wy_p[5];
       fung_param_derivs(f, d, x, y, Wx_p, Wy_p);
       double g[5];

@@ -94,6 +94,10 @@ std::unique_ptr<Model> make_model(std::string_view name, const ModelOptions& opt
 
 // ---- Closed forms used by the models, exposed for tests and the haptic loop --------------------
 
+/// Cauchy (true) stress from the nominal stress of an incompressible uniaxial test: the current
+/// cross-section is A0/λ, so σ = λ T (thesis 5.1.16 read backwards). Pa.
+inline double cauchy_from_nominal_uniaxial(double nominal_Pa, double stretch) { return stretch * nominal_Pa; }
+
 /// Fung membrane energy W = c/2 (e^Q − 1) + W_vol with Q = a1 Eθ² + a2 Ez² + 2 a4 Eθ Ez and
 /// W_vol = K t⁻² [(J−1)² + t (ln J)²]/4, J = λθ λz (thesis 5.1.3, 5.1.11, 5.1.13). Without
 /// volumetric part pass K = 0 (t is then unused). Green strains E = (λ² − 1)/2. Pa.

@@ -209,7 +209,7 @@ TEST(PhysicsModels, UnknownModelIsAUsageError) {
 }
 
 // Table 4.1.5's longitudinal means (C2 = −184.1, C3 = −1.72, C4 = 53.77) give u > 1 from
-// λ ≈ 1.1 on, so −C1/2 ln(1 − u) is undefined over the tested range: that row cannot come from
+// λ ≈ 1.18 on, so −C1/2 ln(1 − u) is undefined over the tested range: that row cannot come from
 // the energy 4.1.3 (it is finite under the misprinted denominator 1 − G/2 of 4.1.7).
 TEST(PhysicsModels, Table415MeansLeaveTheLogDomain) {
   const auto m = make_model("artery-logpoly");
