@@ -1,9 +1,163 @@
-// `mesh` subcommand: registered here when its module lands.
+// `mesh` subcommand: label map → organ surfaces, wall bodies and tetrahedral meshes, written in
+// every simulator format with a quality.json per organ (meshing/mesh.h, meshing/export.h).
 
+#include "core/errors.h"
+#include "meshing/export.h"
+#include "meshing/mesh.h"
+#include "physics/presets.h"
 #include "pipeline/commands.h"
+#include "pipeline/image_io.h"
+#include "pipeline/runner.h"
+#include "pipeline/terminal_progress.h"
+
+#include <spdlog/fmt/fmt.h>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <memory>
+#include <sstream>
 
 namespace organsmith {
 
-std::vector<Command> meshing_commands(CLI::App&) { return {}; }
+namespace fs = std::filesystem;
+
+namespace {
+
+struct MeshFlags {
+  std::string input, out;
+  double edge_mm = 1.5;
+  std::string formats = "stl,obj,ply,vtp,vtu,msh,msh22,inp,feb";
+  bool ras = false;
+  std::vector<std::string> organs;  // NAME or NAME=LABEL
+  double gallbladder_wall_mm = 2.0, trachea_wall_mm = 2.5;
+  bool no_tets = false, allow_failures = false;
+};
+
+std::vector<std::string> split(const std::string& s, char sep) {
+  std::vector<std::string> out;
+  std::string item;
+  std::istringstream in(s);
+  while (std::getline(in, item, sep))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+std::vector<MeshOrganSpec> organ_specs(const MeshFlags& f) {
+  std::vector<MeshOrganSpec> specs = default_organs();
+  for (auto& s : specs) s.wall_mm = s.model == OrganModel::tube ? f.trachea_wall_mm : f.gallbladder_wall_mm;
+  if (f.organs.empty()) return specs;
+  std::vector<MeshOrganSpec> chosen;
+  for (const auto& item : f.organs) {
+    const auto eq = item.find('=');
+    const std::string name = item.substr(0, eq);
+    MeshOrganSpec spec{name, 0, OrganModel::solid, 0.0};
+    for (const auto& d : specs)
+      if (d.name == name) spec = d;
+    if (eq != std::string::npos) {
+      int v = -1;
+      try {
+        v = std::stoi(item.substr(eq + 1));
+      } catch (...) {
+      }
+      if (v < 1 || v > 255) throw UsageError("--organ " + item + ": the label value must be 1–255", "e.g. --organ trachea=1");
+      spec.label = std::uint8_t(v);
+    } else if (spec.label == 0) {
+      throw UsageError("--organ " + name + " needs its label value", "write it as NAME=LABEL, e.g. --organ liver=3");
+    }
+    chosen.push_back(spec);
+  }
+  return chosen;
+}
+
+/// Materials per tet region from the thesis presets (data/materials.toml [regions]).
+std::map<std::string, Material> region_materials() {
+  std::map<std::string, Material> out;
+  const auto lib = physics::builtin_material_library();
+  for (const auto& [region, id] : lib.regions) out[region] = lib.find(id).material;
+  return out;
+}
+
+int run_mesh(const MeshFlags& f) {
+  const auto t0 = std::chrono::steady_clock::now();
+  if (!fs::exists(f.input)) throw InputError(ExitCode::input_not_found, "the label map does not exist", f.input);
+  const LabelMap labels = read_label_map(f.input);
+  MeshOptions options;
+  options.edge_mm = f.edge_mm;
+  options.organs = organ_specs(f);
+  options.tetrahedra = !f.no_tets;
+  options.enforce_quality = !f.allow_failures;
+  ExportOptions eo;
+  eo.formats = split(f.formats, ',');
+  eo.ras = f.ras;
+  eo.materials = region_materials();
+  {  // reject unknown formats before spending time on meshing
+    const auto known = all_mesh_formats();
+    for (const auto& x : eo.formats)
+      if (std::find(known.begin(), known.end(), x) == known.end())
+        throw UsageError("unknown mesh format '" + x + "'", "choose from stl, obj, ply, vtp, vtu, msh, msh22, inp, feb");
+  }
+
+  TerminalProgress progress;
+  const OrganMeshes meshes = mesh_organs(labels, options, progress);
+  progress.finish();
+  for (const auto& w : meshes.warnings) spdlog::warn("{}", w);
+
+  const fs::path final_dir = fs::absolute(f.out);
+  fs::create_directories(final_dir.parent_path());
+  const fs::path staging = make_staging_dir(final_dir);
+  std::vector<std::string> warnings;
+  try {
+    export_meshes(meshes, staging, eo, &warnings);
+    commit_directory(staging, final_dir);
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(staging, ec);
+    throw;
+  }
+  for (const auto& organ : meshes.organs) {
+    for (const auto& w : organ.warnings) spdlog::warn("{}", w);
+    for (const auto& s : organ.surfaces) {
+      const auto& q = s.quality;
+      std::string line = fmt::format("{:<24} {:>7} triangles, edges within ±25 %: {:.1f} %, min angle {:.1f}°", s.name,
+                                     q.triangles, 100 * q.edge_within_tolerance, q.angle_min_deg);
+      if (q.reference_volume_mm3 > 0)
+        line += fmt::format(", volume {:+.2f} %, HD95 {:.2f} mm", 100 * q.volume_error, q.hd95_mm);
+      spdlog::info("{}{}", line, q.ok() ? "" : "  FAILS: " + q.failures.front());
+    }
+    if (!organ.volume.tets.empty())
+      spdlog::info("{:<24} {:>7} tetrahedra, min dihedral {:.1f}°, max radius-edge {:.2f}{}", organ.spec.name + " (volume)",
+                   organ.volume_quality.tets, organ.volume_quality.dihedral_min_deg, organ.volume_quality.radius_edge_max,
+                   organ.volume_quality.ok() ? "" : "  FAILS: " + organ.volume_quality.failures.front());
+  }
+  for (const auto& w : warnings) spdlog::warn("{}", w);
+  spdlog::info("meshes written to {} in {:.2f} s", final_dir.string(),
+               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+  return 0;
+}
+
+}  // namespace
+
+std::vector<Command> meshing_commands(CLI::App& app) {
+  auto flags = std::make_shared<MeshFlags>();
+  auto* sub = app.add_subcommand(
+      "mesh", "label map → organ surfaces, wall bodies and tetrahedral meshes (STL OBJ PLY VTP VTU MSH INP FEB)");
+  sub->add_option("LABELS", flags->input, "label map (.nii/.nii.gz/.nrrd/.mha)")->required();
+  sub->add_option("--out", flags->out, "output directory (replaced atomically)")->required();
+  sub->add_option("--edge-mm", flags->edge_mm, "target surface edge length in mm (default 1.5)")
+      ->check(CLI::PositiveNumber);
+  sub->add_option("--formats", flags->formats, "comma-separated: stl,obj,ply,vtp,vtu,msh,msh22,inp,feb (default: all)");
+  sub->add_flag("--ras", flags->ras, "write RAS coordinates instead of LPS");
+  sub->add_option("--organ", flags->organs,
+                  "organ to mesh, NAME or NAME=LABEL (default: gallbladder=1 trachea=2); gallbladder gets a wall and "
+                  "a body, trachea a tube wall around its lumen, other names one solid body");
+  sub->add_option("--gallbladder-wall-mm", flags->gallbladder_wall_mm, "gallbladder wall thickness in mm (default 2)")
+      ->check(CLI::PositiveNumber);
+  sub->add_option("--trachea-wall-mm", flags->trachea_wall_mm, "trachea wall thickness in mm (default 2.5)")
+      ->check(CLI::PositiveNumber);
+  sub->add_flag("--no-tets", flags->no_tets, "surfaces only (no tetrahedral meshes)");
+  sub->add_flag("--allow-quality-failures", flags->allow_failures,
+                "write the meshes even when a quality guarantee fails (quality.json says which)");
+  return {Command{sub, [flags] { return run_mesh(*flags); }}};
+}
 
 }  // namespace organsmith

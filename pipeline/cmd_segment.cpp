@@ -1,9 +1,151 @@
-// `segment` subcommand: registered here when its module lands.
+// `segment` subcommand: GVF-snake segmentation of the gallbladder (seeded) and the trachea
+// (found automatically) into labels.nii.gz, contours_<organ>.json and overlay PNGs.
 
+#include "core/errors.h"
 #include "pipeline/commands.h"
+#include "pipeline/image_io.h"
+#include "pipeline/ingest.h"
+#include "pipeline/runner.h"
+#include "pipeline/terminal_progress.h"
+#include "segmentation/presets.h"
+#include "segmentation/segment.h"
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include <chrono>
+#include <fstream>
+#include <memory>
+#include <sstream>
 
 namespace organsmith {
 
-std::vector<Command> segmentation_commands(CLI::App&) { return {}; }
+namespace fs = std::filesystem;
+
+namespace {
+
+struct SegmentFlags {
+  std::string input;
+  std::string out;
+  std::vector<std::string> organs;
+  std::vector<std::string> seeds;      // "X,Y,Z" LPS mm
+  std::vector<std::string> seeds_ijk;  // "I,J,K"
+  std::string presets;                 // TOML file overriding data/organs.toml
+};
+
+std::array<double, 3> parse_triple(const std::string& s, const char* what) {
+  std::array<double, 3> v{};
+  std::istringstream in(s);
+  char c1 = 0, c2 = 0;
+  if (!(in >> v[0] >> c1 >> v[1] >> c2 >> v[2]) || c1 != ',' || c2 != ',' || !(in >> std::ws).eof())
+    throw UsageError(std::string(what) + " '" + s + "' is not three comma-separated numbers",
+                     std::string("write it as ") + (std::string(what) == "--seed" ? "X,Y,Z (LPS mm), e.g. --seed=-27.3,-35.2,-347.5"
+                                                                                  : "I,J,K (voxel index), e.g. --seed-ijk 120,140,33"));
+  return v;
+}
+
+int run_segment(const SegmentFlags& f) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const auto presets = f.presets.empty() ? default_organ_presets() : [&] {
+    std::ifstream in(f.presets);
+    if (!in) throw InputError(ExitCode::input_not_found, "cannot read the organ presets file", f.presets);
+    std::stringstream ss;
+    ss << in.rdbuf();
+    return parse_organ_presets(ss.str(), default_organ_presets());
+  }();
+  // Seeds go, in order, to the organs that need one (--seed and --seed-ijk are not mixed, so
+  // the pairing is unambiguous).
+  if (!f.seeds.empty() && !f.seeds_ijk.empty())
+    throw UsageError("give the seeds either all as --seed (LPS mm) or all as --seed-ijk (voxel index)");
+  std::vector<OrganRequest> requests;
+  std::size_t next_seed = 0;
+  const std::size_t n_seeds = f.seeds.size() + f.seeds_ijk.size();
+  for (const auto& name : f.organs) {
+    auto it = presets.find(name);
+    if (it == presets.end())
+      throw UsageError("unknown organ '" + name + "'", "organs with presets: gallbladder, trachea");
+    OrganRequest r;
+    r.organ = name;
+    if (it->second.needs_seed) {
+      if (next_seed >= n_seeds)
+        throw UsageError("--organ " + name + " needs a seed", "add --seed X,Y,Z (LPS mm) or --seed-ijk I,J,K after it");
+      if (!f.seeds.empty()) {
+        const auto v = parse_triple(f.seeds[next_seed], "--seed");
+        r.seed_lps_mm = Eigen::Vector3d(v[0], v[1], v[2]);
+      } else {
+        const auto v = parse_triple(f.seeds_ijk[next_seed], "--seed-ijk");
+        r.seed_ijk = std::array<std::int64_t, 3>{std::int64_t(std::llround(v[0])), std::int64_t(std::llround(v[1])),
+                                                 std::int64_t(std::llround(v[2]))};
+      }
+      ++next_seed;
+    }
+    requests.push_back(std::move(r));
+  }
+  if (next_seed != n_seeds)
+    throw UsageError(std::to_string(n_seeds) + " seeds given for " + std::to_string(next_seed) + " seeded organs",
+                     "give one --seed per --organ gallbladder; the trachea needs none");
+
+  TerminalProgress progress;
+  const IngestResult in = ingest(f.input, IngestOptions{}, progress);
+  SegmentOptions options;
+  if (!f.presets.empty()) {
+    std::ifstream pin(f.presets);
+    std::stringstream ss;
+    ss << pin.rdbuf();
+    options.preset_overrides_toml = ss.str();
+  }
+  const SegmentationResult r = segment_organs(in.volume, requests, options, progress);
+  progress.finish();
+
+  const fs::path final_dir = fs::absolute(f.out);
+  fs::create_directories(final_dir.parent_path());
+  const fs::path staging = make_staging_dir(final_dir);
+  try {
+    write_label_map(r.labels, staging / "labels.nii.gz");
+    nlohmann::json summary = {{"input_format", in.report.format}, {"organs", nlohmann::json::array()}};
+    for (const auto& o : r.organs) {
+      write_text_atomic(staging / ("contours_" + o.organ + ".json"), contours_json(o));
+      nlohmann::json jo = {{"organ", o.organ},          {"label", o.label},
+                           {"volume_ml", o.volume_ml},  {"slices", {o.first_slice, o.last_slice}},
+                           {"contours", o.contours.contours.size()}, {"notes", o.notes}};
+      if (o.seed_lps_mm) jo["seed_lps_mm"] = {o.seed_lps_mm->x(), o.seed_lps_mm->y(), o.seed_lps_mm->z()};
+      summary["organs"].push_back(jo);
+    }
+    write_text_atomic(staging / "segmentation.json", summary.dump(2) + "\n");
+    write_overlays(in.volume, r, staging);
+    commit_directory(staging, final_dir);
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(staging, ec);
+    throw;
+  }
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  for (const auto& o : r.organs)
+    spdlog::info("{}: {:.2f} ml on slices {}–{} ({})", o.organ, o.volume_ml, o.first_slice, o.last_slice,
+                 o.notes.empty() ? "" : o.notes.back());
+  spdlog::info("segmentation written to {} in {:.2f} s: labels.nii.gz, contours_*.json, overlay_*.png",
+               final_dir.string(), s);
+  return 0;
+}
+
+}  // namespace
+
+std::vector<Command> segmentation_commands(CLI::App& app) {
+  auto flags = std::make_shared<SegmentFlags>();
+  auto* sub = app.add_subcommand(
+      "segment",
+      "Segment organs with GVF active contours, slice by slice: the gallbladder from one seed inside it,\n"
+      "the trachea automatically (most cranial round midline air lumen down to the carina).\n"
+      "Writes DIR/labels.nii.gz (1 gallbladder, 2 trachea; the input's grid), DIR/contours_<organ>.json\n"
+      "(LPS mm), DIR/overlay_<organ>.png for review, and DIR/segmentation.json.");
+  sub->add_option("INPUT", flags->input, "DICOM directory or file, or .nii/.nii.gz/.nrrd/.mha")->required();
+  sub->add_option("--out", flags->out, "output directory (replaced atomically)")->required();
+  sub->add_option("--organ", flags->organs, "gallbladder or trachea; repeat for several organs")->required();
+  sub->add_option("--seed", flags->seeds, "seed inside the organ, X,Y,Z in LPS mm; one per seeded --organ, in order")
+      ->allow_extra_args(false);
+  sub->add_option("--seed-ijk", flags->seeds_ijk, "seed as voxel index I,J,K instead of --seed")->allow_extra_args(false);
+  sub->add_option("--presets", flags->presets, "TOML file overriding organ presets (keys as in data/organs.toml)");
+  return {Command{sub, [flags] { return run_segment(*flags); }}};
+}
 
 }  // namespace organsmith

@@ -1,9 +1,358 @@
-// `snapshot` and `preview` subcommands: registered here when the viewer lands.
+// Viewer subcommands: `snapshot` (off-screen PNG views of what a run left in its output
+// directory) and `preview` (the interactive window with a mouse-driven tool).
 
+#include "core/errors.h"
 #include "pipeline/commands.h"
+#include "pipeline/image_io.h"
+#include "pipeline/ingest.h"
+#include "pipeline/runner.h"
+#include "pipeline/terminal_progress.h"
+#include "viewer/label_surface.h"
+#include "viewer/mesh_files.h"
+#include "viewer/preview.h"
+#include "viewer/snapshot.h"
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+#include <fstream>
+#include <iostream>
+#include <optional>
+#include <regex>
+#include <set>
 
 namespace organsmith {
 
-std::vector<Command> viewer_commands(CLI::App&) { return {}; }
+namespace fs = std::filesystem;
+
+namespace {
+
+/// Label values of the organs organsmith knows (see core/volume.h `Label`).
+std::optional<std::uint8_t> organ_label(const std::string& name) {
+  for (int v = 1; v <= 5; ++v)
+    if (label_name(std::uint8_t(v)) == name) return std::uint8_t(v);
+  return std::nullopt;
+}
+
+std::pair<int, int> parse_size(const std::string& s) {
+  static const std::regex re(R"((\d+)[xX](\d+))");
+  std::smatch m;
+  if (!std::regex_match(s, m, re)) throw UsageError("--size '" + s + "' is not WIDTHxHEIGHT", "e.g. --size 1024x768");
+  return {std::stoi(m[1]), std::stoi(m[2])};
+}
+
+nlohmann::json read_json_or_null(const fs::path& p) {
+  std::ifstream in(p);
+  if (!in) return nullptr;
+  try {
+    return nlohmann::json::parse(in);
+  } catch (const std::exception&) {
+    spdlog::warn("{} is not valid JSON; ignored", p.string());
+    return nullptr;
+  }
+}
+
+/// Contours written by the segmentation stage (contours_<organ>.json). Read leniently: the file
+/// is {"organ": …, "contours": [{"slice_k": k, "points_lps_mm": [[x, y, z], …], "closed": b}]}.
+std::optional<ContourStack> read_contours(const fs::path& p, const std::string& organ) {
+  const nlohmann::json j = read_json_or_null(p);
+  if (!j.is_object() || !j.contains("contours") || !j["contours"].is_array()) return std::nullopt;
+  ContourStack stack;
+  stack.organ = j.value("organ", organ);
+  try {
+    for (const auto& c : j["contours"]) {
+      Contour contour;
+      contour.slice_k = c.value("slice_k", std::int64_t(0));
+      contour.closed = c.value("closed", true);
+      for (const auto& q : c.at("points_lps_mm")) contour.points_lps_mm.emplace_back(q.at(0), q.at(1), q.at(2));
+      stack.contours.push_back(std::move(contour));
+    }
+  } catch (const std::exception&) {
+    spdlog::warn("{}: contours not in the expected form; not drawn", p.string());
+    return std::nullopt;
+  }
+  return stack;
+}
+
+/// Everything `snapshot` and `preview` draw, read from a run's output directory. Owns the CT and
+/// the label map that `scene` points to: not copyable or movable.
+struct OutputScene {
+  std::optional<Volume> ct;
+  std::optional<LabelMap> labels;
+  SnapshotScene scene;
+  std::vector<std::string> missing;  ///< what was looked for and not found (said in the log)
+
+  OutputScene() = default;
+  OutputScene(const OutputScene&) = delete;
+  OutputScene& operator=(const OutputScene&) = delete;
+};
+
+struct LoadFlags {
+  std::string ct, labels;
+  bool need_ct = true;
+  int context_step_vox = 2;  ///< in-plane sampling of the context surfaces (liver, lungs); 0 = none
+};
+
+void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene& os, Progress& progress) {
+  std::error_code ec;
+  if (!fs::is_directory(out, ec))
+    throw InputError(ExitCode::input_not_found, "no such output directory", out,
+                     "give the directory `organsmith run --out` wrote (default: out)");
+  SnapshotScene& scene = os.scene;
+  const nlohmann::json manifest = read_json_or_null(out / "manifest.json");
+  scene.case_name = out.filename().string();
+  if (manifest.is_object() && manifest.contains("case") && manifest["case"].is_object())
+    scene.case_name = manifest["case"].value("name", scene.case_name);
+
+  // Organs: those of the case, else the two organsmith models.
+  std::vector<std::string> organ_names;
+  if (manifest.is_object() && manifest.contains("case") && manifest["case"].contains("organs"))
+    for (const auto& o : manifest["case"]["organs"])
+      if (o.is_object() && o.contains("name")) organ_names.push_back(o["name"].get<std::string>());
+  if (organ_names.empty()) organ_names = {"gallbladder", "trachea"};
+  for (const auto& n : organ_names)
+    if (const auto v = organ_label(n)) scene.organs.push_back({n, *v});
+
+  // CT: as given, else the phantom the run synthesised, else the case's input.
+  if (flags.need_ct) {
+    fs::path ct = flags.ct;
+    if (ct.empty() && fs::exists(out / "phantom" / "dicom")) ct = out / "phantom" / "dicom";
+    if (ct.empty() && manifest.is_object() && manifest.contains("case") && manifest["case"].contains("input")) {
+      const auto& in = manifest["case"]["input"];
+      if (in.is_string() && fs::exists(in.get<std::string>())) ct = in.get<std::string>();
+    }
+    if (ct.empty()) {
+      os.missing.push_back("the CT (no phantom/dicom in the output, no readable case input; give --ct): no slice views");
+    } else {
+      IngestResult r = ingest(ct, IngestOptions{}, progress);
+      os.ct = std::move(r.volume);
+      scene.ct = &*os.ct;
+    }
+  }
+
+  // Labels: the segmentation, else the phantom's ground truth.
+  fs::path labels = flags.labels;
+  std::string source = "label map " + fs::path(flags.labels).filename().string();
+  if (labels.empty() && fs::exists(out / "labels.nii.gz")) labels = out / "labels.nii.gz", source = "segmentation";
+  if (labels.empty() && fs::exists(out / "phantom" / "ground_truth.nii.gz")) {
+    labels = out / "phantom" / "ground_truth.nii.gz";
+    source = "phantom ground truth";
+    os.missing.push_back("the segmentation (labels.nii.gz): outlines show the phantom's ground truth instead");
+  }
+  if (!labels.empty()) {
+    os.labels = read_label_map(labels);
+    scene.labels = &*os.labels;
+    scene.labels_source = source;
+    if (os.ct && !os.labels->grid.same_geometry(os.ct->grid)) {
+      spdlog::warn("{} is not on the CT's grid: slices are drawn without outlines", labels.string());
+      scene.labels = nullptr;
+    }
+  } else {
+    os.missing.push_back("a label map (labels.nii.gz or phantom/ground_truth.nii.gz): no outlines, no slice views");
+  }
+
+  // Contours of the segmentation stage.
+  for (const auto& o : scene.organs)
+    if (const auto p = out / ("contours_" + o.name + ".json"); fs::exists(p))
+      if (auto stack = read_contours(p, o.name)) scene.contours.push_back(std::move(*stack));
+
+  // Meshes (.vtp surfaces and paths, .vtu tetrahedra) anywhere in the output but the phantom
+  // and the snapshots, in name order so that every run draws them in the same order.
+  std::vector<fs::path> files;
+  for (auto it = fs::recursive_directory_iterator(out, ec); !ec && it != fs::recursive_directory_iterator(); ++it) {
+    const auto name = it->path().filename().string();
+    if (it->is_directory() && (name == "phantom" || name == "snapshots" || name.rfind('.', 0) == 0)) {
+      it.disable_recursion_pending();
+      continue;
+    }
+    const auto ext = it->path().extension().string();
+    if (it->is_regular_file() && (ext == ".vtp" || ext == ".vtu")) files.push_back(it->path());
+  }
+  std::sort(files.begin(), files.end());
+  auto organ_of = [&](const std::string& stem) {
+    for (const auto& o : scene.organs)
+      if (stem.find(o.name) != std::string::npos) return o.name;
+    return stem;
+  };
+  for (const auto& f : files) {
+    MeshFileContents m;
+    try {
+      m = read_mesh_file(f);
+    } catch (const Error& e) {
+      spdlog::warn("{}", e.what());
+      continue;
+    }
+    const std::string stem = f.stem().string(), organ = organ_of(stem);
+    if (!m.surface.triangles.empty()) {
+      SceneSurface s;
+      s.name = stem;
+      s.organ = organ;
+      s.colour = organ_colour(organ);
+      s.mesh = std::move(m.surface);
+      s.source = "mesh stage";
+      scene.surfaces.push_back(std::move(s));
+    }
+    for (auto& l : m.lines) scene.paths.push_back({std::move(l)});
+    if (!m.tets.tets.empty()) scene.tet_meshes.push_back({organ, std::move(m.tets)});
+  }
+  // An organ drawn with several surfaces: the outermost (largest volume) is its wall, translucent.
+  std::map<std::string, std::vector<SceneSurface*>> by_organ;
+  for (auto& s : scene.surfaces) by_organ[s.organ].push_back(&s);
+  for (auto& [organ, list] : by_organ)
+    if (list.size() > 1) {
+      auto outer = std::max_element(list.begin(), list.end(), [](auto* a, auto* b) {
+        return std::abs(a->mesh.signed_volume_mm3()) < std::abs(b->mesh.signed_volume_mm3());
+      });
+      (*outer)->opacity = 0.35;
+    }
+
+  // Organs the meshing stage has not (yet) produced: a label-map isosurface, said so in the title.
+  if (scene.labels) {
+    for (const auto& o : scene.organs) {
+      if (by_organ.count(o.name)) continue;
+      SceneSurface s;
+      s.name = o.name;
+      s.organ = o.name;
+      s.colour = organ_colour(o.name);
+      s.mesh = label_surface(*scene.labels, o.label);
+      s.source = "label-map isosurface (no mesh-stage output)";
+      if (s.mesh.triangles.empty()) {
+        os.missing.push_back("organ " + o.name + " (absent from the label map)");
+        continue;
+      }
+      os.missing.push_back("the " + o.name + " mesh (meshing stage output): drawn as a label-map isosurface");
+      scene.surfaces.push_back(std::move(s));
+    }
+    // Context for the overview: the liver around the gallbladder, the lungs around the trachea,
+    // from the label map when it has them, else from the phantom's ground truth.
+    const LabelMap* context_labels = scene.labels;
+    std::optional<LabelMap> truth;
+    if (flags.context_step_vox > 0 && scene.labels->count(3) == 0 && scene.labels->count(4) == 0 &&
+        fs::exists(out / "phantom" / "ground_truth.nii.gz")) {
+      truth = read_label_map(out / "phantom" / "ground_truth.nii.gz");
+      context_labels = &*truth;
+    }
+    for (const char* name : {"liver", "lungs"}) {
+      const auto v = organ_label(name);
+      if (!v || flags.context_step_vox <= 0) continue;
+      SceneSurface s;
+      s.name = name;
+      s.organ = name;
+      s.colour = organ_colour(name);
+      s.opacity = std::string(name) == "liver" ? 0.3 : 0.15;
+      s.context = true;
+      LabelSurfaceOptions lo;
+      lo.step_vox = flags.context_step_vox;
+      s.mesh = label_surface(*context_labels, *v, lo);
+      s.source = truth ? "context from phantom ground truth" : "";
+      if (!s.mesh.triangles.empty()) scene.surfaces.push_back(std::move(s));
+    }
+  }
+  if (scene.tet_meshes.empty()) os.missing.push_back("tetrahedral meshes (.vtu): no tets_ views");
+  if (scene.paths.empty()) os.missing.push_back("guidance paths: the overview has none");
+  os.missing.push_back("calibration plots: `organsmith calibrate` results are not drawn by this command yet");
+}
+
+int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& views, const std::string& size,
+                 const LoadFlags& flags) {
+  SnapshotOptions options;
+  if (!size.empty()) std::tie(options.width_px, options.height_px) = parse_size(size);
+  if (!views.empty()) {
+    options.views.clear();
+    for (const auto& v : views) options.views.push_back(parse_view_kind(v));
+  }
+  const fs::path out = fs::absolute(out_arg);
+  TerminalProgress progress;
+  OutputScene os;
+  load_output_scene(out, flags, os, progress);
+  for (const auto& m : os.missing) spdlog::info("not found: {}", m);
+  const auto names = snapshot_view_names(os.scene, options);
+  if (names.empty())
+    throw InputError(ExitCode::input_not_found, "nothing to draw: no CT, label map or meshes found", out,
+                     "run `organsmith run --out " + out_arg + "` first");
+  const fs::path final_dir = out / "snapshots";
+  const fs::path staging = make_staging_dir(final_dir);
+  std::vector<fs::path> written;
+  try {
+    written = render_snapshots(os.scene, options, staging, progress);
+    commit_directory(staging, final_dir);
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(staging, ec);
+    throw;
+  }
+  progress.finish();
+  std::cout << "organsmith wrote " << written.size() << " snapshots (" << options.width_px << "x" << options.height_px
+            << ") into " << final_dir.string() << ":\n";
+  for (const auto& p : written) std::cout << "  " << p.filename().string() << "\n";
+  return 0;
+}
+
+int cmd_preview(const std::string& out_arg, const std::string& size, double quit_after_s, const LoadFlags& flags) {
+  PreviewOptions options;
+  if (!size.empty()) std::tie(options.width_px, options.height_px) = parse_size(size);
+  options.quit_after_s = quit_after_s;
+  options.on_event = [](const std::string& e) { std::cout << "preview: " << e << std::endl; };
+  TerminalProgress progress;
+  OutputScene os;
+  LoadFlags f = flags;
+  f.need_ct = false;         // the window shows surfaces and paths only
+  f.context_step_vox = 0;    // organs only: translucent context costs the 30 fps on llvmpipe
+  load_output_scene(fs::absolute(out_arg), f, os, progress);
+  progress.finish();
+  for (const auto& m : os.missing) spdlog::info("not found: {}", m);
+  if (os.scene.surfaces.empty())
+    throw InputError(ExitCode::input_not_found, "nothing to show: no meshes and no label map", fs::absolute(out_arg),
+                     "run `organsmith run --out " + out_arg + "` first");
+  spdlog::info("preview: the tool is passive until the haptics stage lands (no force is computed)");
+  run_preview(os.scene, options);
+  return 0;
+}
+
+}  // namespace
+
+std::vector<Command> viewer_commands(CLI::App& app) {
+  std::vector<Command> commands;
+
+  struct SnapshotArgs {
+    std::string out, size;
+    std::vector<std::string> views;
+    LoadFlags load;
+  };
+  auto sa = std::make_shared<SnapshotArgs>();
+  auto* snap = app.add_subcommand(
+      "snapshot",
+      "Render PNG views of what a run left in OUT_DIR into OUT_DIR/snapshots/ (replaced atomically):\n"
+      "3D organ models, all organs with paths, axial/coronal/sagittal slices with the segmentation\n"
+      "outline, tetrahedral cuts coloured by quality. Needs no display (starts a private Xvfb).");
+  snap->add_option("OUT_DIR", sa->out, "output directory of `organsmith run`")->required();
+  snap->add_option("--views", sa->views, "views to render: organs overview slices tets plots (default: all)")
+      ->delimiter(',');
+  snap->add_option("--size", sa->size, "PNG size WIDTHxHEIGHT (default 1024x768)");
+  snap->add_option("--ct", sa->load.ct, "CT to slice (default: OUT_DIR/phantom/dicom or the case's input)");
+  snap->add_option("--labels", sa->load.labels,
+                   "label map to outline (default: OUT_DIR/labels.nii.gz, else the phantom's ground truth)");
+  commands.push_back({snap, [sa] { return cmd_snapshot(sa->out, sa->views, sa->size, sa->load); }});
+
+  struct PreviewArgs {
+    std::string out, size;
+    double quit_after_s = 0;
+    LoadFlags load;
+  };
+  auto pa = std::make_shared<PreviewArgs>();
+  auto* prev = app.add_subcommand(
+      "preview",
+      "Open the interactive preview of OUT_DIR: organs, paths and a tool proxy. The mouse moves the\n"
+      "tool (wheel: depth; left drag turns the view); keys 1/2/3 switch guidance-only, mixed and\n"
+      "reaction-only modes; q quits. The tool is passive until the haptics stage lands.");
+  prev->add_option("OUT_DIR", pa->out, "output directory of `organsmith run`")->required();
+  prev->add_option("--size", pa->size, "window size WIDTHxHEIGHT (default 1024x768)");
+  prev->add_option("--labels", pa->load.labels, "label map to draw when there are no meshes");
+  prev->add_option("--quit-after", pa->quit_after_s, "close the window after this many seconds (0 = never)")
+      ->check(CLI::NonNegativeNumber);
+  commands.push_back({prev, [pa] { return cmd_preview(pa->out, pa->size, pa->quit_after_s, pa->load); }});
+  return commands;
+}
 
 }  // namespace organsmith

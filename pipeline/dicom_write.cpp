@@ -6,6 +6,7 @@
 
 #include <gdcmImage.h>
 #include <gdcmImageWriter.h>
+#include <gdcmTrace.h>
 #include <tbb/parallel_for.h>
 
 #include <atomic>
@@ -71,6 +72,7 @@ void write_dicom_series(const Volume& volume, const fs::path& dir, const DicomSe
   fs::create_directories(dir, ec);
   if (ec) throw OutputError("cannot create the DICOM output directory: " + ec.message(), dir);
 
+  gdcm::Trace::SetWarning(false);  // GDCM warns about attributes it fills in itself
   std::atomic<std::int64_t> done{0};
   std::atomic<bool> failed{false};
   tbb::parallel_for(std::int64_t(0), nk, [&](std::int64_t k) {
@@ -130,6 +132,7 @@ void write_dicom_series(const Volume& volume, const fs::path& dir, const DicomSe
     put_string(ds, 0x0020, 0x0013, gdcm::VR::IS, instance);
     put_string(ds, 0x0020, 0x0052, gdcm::VR::UI, frame_uid);
     put_string(ds, 0x0020, 0x0032, gdcm::VR::DS, ds_string(origin));
+    put_string(ds, 0x0028, 0x0004, gdcm::VR::CS, "MONOCHROME2");
     put_string(ds, 0x0028, 0x1050, gdcm::VR::DS, "40");
     put_string(ds, 0x0028, 0x1051, gdcm::VR::DS, "400");
 

@@ -68,7 +68,7 @@ struct IngestFlags {
 int cmd_info(const fs::path& input, const IngestFlags& flags, bool as_json) {
   IngestOptions options;
   flags.apply(options);
-  TerminalProgress progress;
+  TerminalProgress progress(spdlog::get_level() >= spdlog::level::warn);
   const IngestResult r = ingest(input, options, progress);
   progress.finish();
   const ImageGrid& g = r.volume.grid;
@@ -110,7 +110,7 @@ int cmd_info(const fs::path& input, const IngestFlags& flags, bool as_json) {
 }
 
 int cmd_phantom(const fs::path& out, const PhantomOptions& options) {
-  TerminalProgress progress;
+  TerminalProgress progress(spdlog::get_level() >= spdlog::level::warn);
   const auto t0 = std::chrono::steady_clock::now();
   const fs::path final_dir = fs::absolute(out);
   fs::create_directories(final_dir.parent_path());
@@ -157,7 +157,7 @@ int cmd_run(const std::string& case_path, const std::string& out, bool force, co
   flags.apply(c.ingest);
   spdlog::info("case '{}': {} → {}", c.name, c.synthesize_phantom ? std::string("synthetic phantom") : c.input.string(),
                fs::absolute(c.out_dir).string());
-  TerminalProgress progress;
+  TerminalProgress progress(spdlog::get_level() >= spdlog::level::warn);
   RunOptions options;
   options.force = force;
   options.until = until;

@@ -7,6 +7,7 @@
 #include "pipeline/phantom.h"
 #include "pipeline/image_io.h"
 #include "pipeline/phantom_files.h"
+#include "physics/presets.h"
 #include "segmentation/segment.h"
 
 #include <spdlog/spdlog.h>
@@ -162,7 +163,33 @@ class Runner {
       const nlohmann::json seg_opts = case_.other_stages.value("segment", nlohmann::json::object());
       execute({"segment", fingerprint("segment", seg_opts.dump() + outputs_digest("ingest")),
                [&](const fs::path& staging) { write_segmentation(staging); }});
+      execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
+               [&](const fs::path& staging) {
+                 write_text_atomic(staging / "materials.json", materials_json().dump(2) + "\n");
+               }});
     }
+  }
+
+  /// The calibrated material of each organ region (physics presets, thesis tables), as written
+  /// to materials.json and into the solver files.
+  nlohmann::json materials_json() const {
+    const physics::MaterialLibrary lib = physics::builtin_material_library();
+    nlohmann::json regions = nlohmann::json::object();
+    for (const auto& organ : case_.organs) {
+      for (const auto& [region, preset_id] : lib.regions) {
+        if (region.rfind(organ.name + "_", 0) != 0) continue;
+        const physics::MaterialPreset& preset = lib.find(preset_id);
+        nlohmann::json params = nlohmann::json::array();
+        for (const auto& p : preset.material.parameters)
+          params.push_back({{"name", p.name}, {"value", p.value}, {"unit", p.unit}});
+        regions[region] = {{"preset", preset_id},
+                           {"model", preset.material.model},
+                           {"parameters", params},
+                           {"constants", preset.constants},
+                           {"source", preset.material.source}};
+      }
+    }
+    return {{"regions", regions}};
   }
 
   /// The ingested volume: kept from the ingest stage, or read again when that stage was reused.
@@ -336,6 +363,7 @@ class Runner {
     m["case"] = to_json(case_);
     m["input"] = input_json_;
     m["coordinates"] = "LPS millimetres (DICOM patient coordinates)";
+    if (!case_.organs.empty()) m["materials"] = materials_json()["regions"];
     m["stages"] = nlohmann::json::array();
     for (const auto& r : records_)
       m["stages"].push_back({{"name", r.name},
@@ -411,7 +439,7 @@ void write_text_atomic(const fs::path& path, const std::string& text) {
 }
 
 const std::vector<std::string>& stage_names() {
-  static const std::vector<std::string> names = {"phantom", "ingest", "segment"};
+  static const std::vector<std::string> names = {"phantom", "ingest", "segment", "attach"};
   return names;
 }
 

@@ -12,7 +12,7 @@ volatile std::sig_atomic_t g_interrupted = 0;  // set by the SIGINT handler only
 extern "C" void on_sigint(int) { g_interrupted = 1; }
 }  // namespace
 
-TerminalProgress::TerminalProgress() : tty_(isatty(STDERR_FILENO) != 0) {
+TerminalProgress::TerminalProgress(bool quiet) : tty_(isatty(STDERR_FILENO) != 0), quiet_(quiet) {
   std::signal(SIGINT, on_sigint);
 }
 
@@ -24,6 +24,7 @@ TerminalProgress::~TerminalProgress() {
 bool TerminalProgress::cancelled() const { return g_interrupted != 0; }
 
 void TerminalProgress::report(double fraction, std::string_view what) {
+  if (quiet_) return;
   std::lock_guard lock(mutex_);
   fraction = std::clamp(fraction, 0.0, 1.0);
   if (what != task_) {

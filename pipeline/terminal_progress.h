@@ -15,7 +15,8 @@ namespace organsmith {
 /// it prints a plain line each time a task passes another 25 %. Ctrl-C requests cancellation.
 class TerminalProgress final : public Progress {
  public:
-  TerminalProgress();
+  /// quiet = true: report nothing (cancellation still works).
+  explicit TerminalProgress(bool quiet = false);
   ~TerminalProgress() override;
   void report(double fraction, std::string_view what) override;
   bool cancelled() const override;
@@ -24,6 +25,7 @@ class TerminalProgress final : public Progress {
 
  private:
   bool tty_;
+  bool quiet_;
   std::mutex mutex_;
   std::string task_;
   int last_step_ = -1;
