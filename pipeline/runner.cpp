@@ -8,6 +8,8 @@
 #include "pipeline/image_io.h"
 #include "pipeline/phantom_files.h"
 #include "physics/presets.h"
+#include "pipeline/output_scene.h"
+#include "viewer/snapshot.h"
 #include "segmentation/segment.h"
 
 #include <spdlog/spdlog.h>
@@ -168,6 +170,21 @@ class Runner {
                  write_text_atomic(staging / "materials.json", materials_json().dump(2) + "\n");
                }});
     }
+    const nlohmann::json snap_opts = case_.other_stages.value("snapshot", nlohmann::json::object());
+    execute({"snapshot",
+             fingerprint("snapshot", snap_opts.dump() + outputs_digest("ingest") + outputs_digest("segment") +
+                                         outputs_digest("mesh") + outputs_digest("attach")),
+             [&](const fs::path& staging) { write_snapshots(staging); }});
+  }
+
+  /// snapshot renders the review PNGs of everything the earlier stages left in the output.
+  void write_snapshots(const fs::path& staging) {
+    OutputScene os;
+    load_output_scene(out_, LoadFlags{}, os, progress_);
+    for (const auto& m : os.missing) spdlog::info("snapshot: not found: {}", m);
+    fs::create_directories(staging / "snapshots");
+    const auto written = render_snapshots(os.scene, SnapshotOptions{}, staging / "snapshots", progress_);
+    spdlog::info("snapshot: {} views", written.size());
   }
 
   /// The calibrated material of each organ region (physics presets, thesis tables), as written
@@ -439,7 +456,7 @@ void write_text_atomic(const fs::path& path, const std::string& text) {
 }
 
 const std::vector<std::string>& stage_names() {
-  static const std::vector<std::string> names = {"phantom", "ingest", "segment", "attach"};
+  static const std::vector<std::string> names = {"phantom", "ingest", "segment", "attach", "snapshot"};
   return names;
 }
 

@@ -1,0 +1,193 @@
+// The interactive preview under a private Xvfb: real X input events (XTest) move the tool and
+// switch the mode; screenshots of the window show that the tool moved and the label changed.
+
+#include <gtest/gtest.h>  // before Xlib, whose None/True/False macros collide with gtest
+
+#include "test_support.h"
+#include "viewer/display.h"
+#include "viewer/image.h"
+#include "viewer_fixture.h"
+
+#include <X11/Xlib.h>
+#include <X11/Xutil.h>
+#include <X11/keysym.h>
+#include <dlfcn.h>
+#include <sys/wait.h>
+
+#include <chrono>
+#include <cstdio>
+#include <optional>
+#include <thread>
+
+using namespace organsmith;
+using namespace organsmith::testing;
+namespace fs = std::filesystem;
+
+namespace {
+
+/// XTest entry points, loaded at run time (the Debian package libxtst6 is present wherever
+/// Xvfb is, but its headers need not be).
+struct XTest {
+  using Motion = int (*)(Display*, int, int, int, unsigned long);
+  using Key = int (*)(Display*, unsigned int, int, unsigned long);
+  Motion motion = nullptr;
+  Key key = nullptr;
+  void* lib = nullptr;
+  XTest() {
+    lib = dlopen("libXtst.so.6", RTLD_NOW);
+    if (!lib) return;
+    motion = reinterpret_cast<Motion>(dlsym(lib, "XTestFakeMotionEvent"));
+    key = reinterpret_cast<Key>(dlsym(lib, "XTestFakeKeyEvent"));
+  }
+  bool ok() const { return motion && key; }
+};
+
+Window find_window(Display* d, Window w, const std::string& title) {
+  char* name = nullptr;
+  if (XFetchName(d, w, &name) && name) {
+    const bool match = title == name;
+    XFree(name);
+    if (match) return w;
+  }
+  Window root, parent, *children = nullptr;
+  unsigned int n = 0;
+  if (!XQueryTree(d, w, &root, &parent, &children, &n)) return 0;
+  Window found = 0;
+  for (unsigned int i = 0; i < n && !found; ++i) found = find_window(d, children[i], title);
+  if (children) XFree(children);
+  return found;
+}
+
+RgbImage screenshot(Display* d, Window w) {
+  XWindowAttributes a;
+  XGetWindowAttributes(d, w, &a);
+  XImage* x = XGetImage(d, w, 0, 0, unsigned(a.width), unsigned(a.height), AllPlanes, ZPixmap);
+  RgbImage img;
+  if (!x) return img;
+  img.width_px = a.width;
+  img.height_px = a.height;
+  img.rgb.resize(std::size_t(a.width) * a.height * 3);
+  for (int y = 0; y < a.height; ++y)
+    for (int c = 0; c < a.width; ++c) {
+      const unsigned long p = XGetPixel(x, c, y);
+      std::uint8_t* o = img.rgb.data() + (std::size_t(y) * a.width + c) * 3;
+      o[0] = std::uint8_t((p & x->red_mask) >> 16);
+      o[1] = std::uint8_t((p & x->green_mask) >> 8);
+      o[2] = std::uint8_t(p & x->blue_mask);
+    }
+  XDestroyImage(x);
+  return img;
+}
+
+/// Centroid (x, y) of the tool's cyan pixels and their number.
+std::optional<std::pair<double, double>> tool_centroid(const RgbImage& img, std::size_t& n) {
+  double sx = 0, sy = 0;
+  n = 0;
+  for (int y = 0; y < img.height_px; ++y)
+    for (int x = 0; x < img.width_px; ++x) {
+      const std::uint8_t* p = img.pixel(x, y);
+      if (p[1] > 150 && p[2] > 150 && int(p[1]) - int(p[0]) > 90 && std::abs(int(p[1]) - int(p[2])) < 40) {
+        sx += x, sy += y, ++n;
+      }
+    }
+  if (n < 30) return std::nullopt;
+  return std::make_pair(sx / double(n), sy / double(n));
+}
+
+std::size_t differing_pixels(const RgbImage& a, const RgbImage& b, int x0, int y0, int x1, int y1) {
+  std::size_t n = 0;
+  for (int y = y0; y < y1; ++y)
+    for (int x = x0; x < x1; ++x) {
+      const std::uint8_t *p = a.pixel(x, y), *q = b.pixel(x, y);
+      n += (std::abs(p[0] - q[0]) + std::abs(p[1] - q[1]) + std::abs(p[2] - q[2]) > 60) ? 1 : 0;
+    }
+  return n;
+}
+
+/// Keeps a screenshot in $ORGANSMITH_KEEP_PREVIEW_SHOTS when set (to look at it).
+void keep_shot(const RgbImage& img, const std::string& name) {
+  if (const char* dir = std::getenv("ORGANSMITH_KEEP_PREVIEW_SHOTS"); dir && img.width_px > 0)
+    write_png(img, fs::path(dir) / name);
+}
+
+}  // namespace
+
+TEST(Preview, MouseMovesTheToolAndKeysSwitchTheMode) {
+  XTest xtest;
+  ASSERT_TRUE(xtest.ok()) << "libXtst.so.6 (Debian package libxtst6) is needed to inject X input events";
+  DisplayOptions dopt;
+  dopt.private_xvfb = true;  // never on the developer's own screen
+  DisplaySession session(dopt);
+  Display* d = static_cast<Display*>(session.x_display());
+
+  ScratchDir out("viewer-preview");
+  fs::copy(small_phantom_dir(), out / "phantom", fs::copy_options::recursive);
+  const std::string title = "organsmith preview";
+  const std::string cmd = "DISPLAY=" + session.name() + " exec '" + std::string(ORGANSMITH_CLI) + "' preview '" +
+                          out.path().string() + "' --size 800x600 --quit-after 120 2>&1";
+  FILE* proc = popen(cmd.c_str(), "r");
+  ASSERT_NE(proc, nullptr);
+  std::string log;
+  char line[1024];
+  while (fgets(line, sizeof line, proc)) {
+    log += line;
+    if (log.find("preview: ready") != std::string::npos) break;
+  }
+  ASSERT_NE(log.find("preview: ready"), std::string::npos) << log;
+
+  Window w = 0;
+  for (int i = 0; i < 100 && !w; ++i) {
+    w = find_window(d, DefaultRootWindow(d), title);
+    if (!w) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  ASSERT_NE(w, 0u) << "no window titled '" << title << "'";
+  int wx = 0, wy = 0;
+  Window child;
+  XTranslateCoordinates(d, w, DefaultRootWindow(d), 0, 0, &wx, &wy, &child);
+  auto move = [&](int x, int y) {
+    xtest.motion(d, DefaultScreen(d), wx + x, wy + y, 0);
+    XFlush(d);
+    std::this_thread::sleep_for(std::chrono::milliseconds(40));
+  };
+  auto press = [&](KeySym sym) {
+    const unsigned int code = XKeysymToKeycode(d, sym);
+    xtest.key(d, code, True, 0);
+    xtest.key(d, code, False, 0);
+    XFlush(d);
+  };
+
+  // The pointer enters at the centre: the tool jumps there; settle, then take the first shot.
+  move(400, 300);
+  move(401, 300);
+  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  const RgbImage before = screenshot(d, w);
+  keep_shot(before, "preview_before.png");
+  ASSERT_EQ(before.width_px, 800);
+  ASSERT_EQ(before.height_px, 600);
+  std::size_t n_before = 0, n_after = 0;
+  const auto c0 = tool_centroid(before, n_before);
+  ASSERT_TRUE(c0) << "tool not visible before the motion";
+
+  // Drag the pointer (no button) to the upper right, then press 3.
+  for (int i = 1; i <= 10; ++i) move(400 + 18 * i, 300 - 10 * i);
+  press(XK_3);
+  std::this_thread::sleep_for(std::chrono::milliseconds(600));
+  const RgbImage after = screenshot(d, w);
+  keep_shot(after, "preview_after.png");
+  const auto c1 = tool_centroid(after, n_after);
+  ASSERT_TRUE(c1) << "tool not visible after the motion";
+  const double dx = c1->first - c0->first, dy = c1->second - c0->second;
+  // The pointer moved 180 px right and 100 px up; the tool follows in the screen plane.
+  EXPECT_GT(dx, 120.0) << "tool did not follow the pointer to the right";
+  EXPECT_LT(dy, -60.0) << "tool did not follow the pointer upwards";
+  // The mode label (top left) changed; the bottom right corner (help text) did not.
+  EXPECT_GT(differing_pixels(before, after, 0, 0, 400, 60), 200u);
+  EXPECT_LT(differing_pixels(before, after, 560, 560, 800, 600), 20u);
+
+  press(XK_q);
+  while (fgets(line, sizeof line, proc)) log += line;
+  const int status = pclose(proc);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << log;
+  EXPECT_NE(log.find("preview: mode 3 reaction only"), std::string::npos) << log;
+  EXPECT_NE(log.find("preview: quit"), std::string::npos) << log;
+}

@@ -1,0 +1,168 @@
+// Off-screen snapshots: every view exists, has the requested size, is not blank, shows the
+// organ's colour, and is byte-identical across two runs.
+
+#include "core/progress.h"
+#include "test_support.h"
+#include "viewer/display.h"
+#include "viewer/label_surface.h"
+#include "viewer/snapshot.h"
+#include "viewer_fixture.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <iterator>
+
+using namespace organsmith;
+using namespace organsmith::testing;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string file_bytes(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+}  // namespace
+
+TEST(LabelSurface, ClosedOutwardAndNearTheVoxelVolume) {
+  auto t = make_test_scene();
+  const SurfaceMesh m = label_surface(t->labels, 1);
+  ASSERT_GT(m.triangles.size(), 100u);
+  const double voxel_mm3 = t->labels.volume_ml(1) * 1000.0;
+  // Outward (positive) and within 15 % of the voxel volume: smoothing barely shrinks it.
+  EXPECT_GT(m.signed_volume_mm3(), 0.85 * voxel_mm3);
+  EXPECT_LT(m.signed_volume_mm3(), 1.15 * voxel_mm3);
+  EXPECT_TRUE(label_surface(t->labels, 77).triangles.empty());
+}
+
+TEST(Snapshot, EveryViewExistsHasTheSizeIsNotBlankAndIsReproducible) {
+  auto t = make_test_scene();
+  ScratchDir a("viewer-a"), b("viewer-b");
+  SnapshotOptions o;
+  o.width_px = 800;
+  o.height_px = 600;
+  NullProgress progress;
+  const auto first = render_snapshots(t->scene, o, a.path(), progress);
+  const auto second = render_snapshots(t->scene, o, b.path(), progress);
+  const auto names = snapshot_view_names(t->scene, o);
+  ASSERT_EQ(first.size(), names.size());
+  // 2 organ views, the overview, 3 slices × 2 organs, one tet cut, two plots.
+  EXPECT_EQ(names.size(), 2u + 1u + 6u + 1u + 2u);
+  const char* keep = std::getenv("ORGANSMITH_KEEP_SNAPSHOTS");  // to look at them
+  for (std::size_t i = 0; i < first.size(); ++i) {
+    SCOPED_TRACE(names[i]);
+    if (keep) fs::copy_file(first[i], fs::path(keep) / first[i].filename(), fs::copy_options::overwrite_existing);
+    ASSERT_TRUE(fs::exists(first[i]));
+    const RgbImage img = read_png(first[i]);
+    EXPECT_EQ(img.width_px, 800);
+    EXPECT_EQ(img.height_px, 600);
+    EXPECT_GT(grey_variance(img), 100.0) << "looks blank";
+    EXPECT_EQ(file_bytes(first[i]), file_bytes(second[i])) << "differs between two runs";
+  }
+}
+
+TEST(Snapshot, OrganViewsShowTheOrganColour) {
+  auto t = make_test_scene();
+  SnapshotOptions o;
+  o.views = {ViewKind::organ_3d, ViewKind::slices};
+  SnapshotRenderer r(o);
+  for (const std::string organ : {"gallbladder", "trachea"}) {
+    SCOPED_TRACE(organ);
+    const RgbImage model = r.render(t->scene, "3d_" + organ);
+    EXPECT_EQ(model.width_px, 1024);
+    EXPECT_EQ(model.height_px, 768);
+    EXPECT_GT(count_hue(model, organ_colour(organ)), 2000u);
+    // The slice outline is drawn in the organ's colour at full brightness, unlit.
+    const Rgb c = organ_colour(organ);
+    const double m = std::max({c.r, c.g, c.b});
+    const RgbImage slice = r.render(t->scene, "slice_" + organ + "_axial");
+    EXPECT_GT(count_colour(slice, Rgb{c.r / m, c.g / m, c.b / m}, 12), 50u);
+  }
+  // The other organ's colour is absent from an organ's own view.
+  const RgbImage gb = r.render(t->scene, "3d_gallbladder");
+  EXPECT_LT(count_hue(gb, organ_colour("trachea")), 50u);
+}
+
+TEST(Snapshot, TetCutShowsQualityColoursAndPlotsDrawTheirSeries) {
+  auto t = make_test_scene();
+  SnapshotOptions o;
+  SnapshotRenderer r(o);
+  const RgbImage tets = r.render(t->scene, "tets_gallbladder");
+  EXPECT_GT(grey_variance(tets), 100.0);
+  // Kuhn tets have radius ratio ≈ 0.72: yellow-green, not the grey of the background.
+  std::size_t coloured = 0;
+  for (std::size_t i = 0; i + 2 < tets.rgb.size(); i += 3)
+    coloured += (std::abs(tets.rgb[i] - tets.rgb[i + 2]) > 80) ? 1 : 0;
+  EXPECT_GT(coloured, 5000u);
+  const RgbImage fit = r.render(t->scene, "plot_fit");
+  EXPECT_GT(count_hue(fit, Rgb{0.85, 0.2, 0.1}), 200u) << "the fitted curve is missing";
+  EXPECT_THROW(r.render(t->scene, "no_such_view"), UsageError);
+}
+
+TEST(Snapshot, SizeOptionIsHonouredAndBadSizesAreRefused) {
+  auto t = make_test_scene();
+  SnapshotOptions o;
+  o.width_px = 640;
+  o.height_px = 480;
+  SnapshotRenderer r(o);
+  const RgbImage img = r.render(t->scene, "3d_overview");
+  EXPECT_EQ(img.width_px, 640);
+  EXPECT_EQ(img.height_px, 480);
+  SnapshotOptions bad;
+  bad.width_px = 10;
+  EXPECT_THROW(SnapshotRenderer{bad}, UsageError);
+}
+
+TEST(Display, NoXServerAndNoXvfbNamesTheDebianPackage) {
+  DisplayOptions o;
+  o.display = "";
+  o.xvfb_program = "organsmith-no-such-xvfb";
+  // Only meaningful without a display: with DISPLAY set the session would use it.
+  if (std::getenv("DISPLAY")) GTEST_SKIP() << "DISPLAY is set";
+  try {
+    DisplaySession s(o);
+    FAIL() << "expected DisplayError";
+  } catch (const DisplayError& e) {
+    EXPECT_NE(std::string(e.what()).find("xvfb"), std::string::npos) << e.what();
+    EXPECT_EQ(e.code(), ExitCode::output);
+  }
+}
+
+TEST(Display, PrivateXvfbIsStartedAndStopped) {
+  if (std::getenv("DISPLAY")) GTEST_SKIP() << "DISPLAY is set";
+  std::string name;
+  {
+    DisplaySession s;
+    EXPECT_TRUE(s.private_xvfb());
+    name = s.name();
+    ASSERT_FALSE(name.empty());
+    EXPECT_TRUE(fs::exists("/tmp/.X11-unix/X" + name.substr(1)));
+  }
+  EXPECT_FALSE(fs::exists("/tmp/.X11-unix/X" + name.substr(1))) << "Xvfb " << name << " still running";
+}
+
+TEST(SnapshotCli, WritesWhatExistsAndSaysWhatIsMissing) {
+  ScratchDir out("viewer-cli");
+  fs::copy(small_phantom_dir(), out / "phantom", fs::copy_options::recursive);
+  const CliResult r = run_cli("snapshot '" + out.path().string() + "' --size 640x480 --views organs,slices");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("not found"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("mesh"), std::string::npos) << r.output;
+  const fs::path snaps = out / "snapshots";
+  for (const std::string name : {"3d_gallbladder", "3d_trachea", "slice_gallbladder_axial", "slice_trachea_sagittal"}) {
+    SCOPED_TRACE(name);
+    ASSERT_TRUE(fs::exists(snaps / (name + ".png")));
+    const RgbImage img = read_png(snaps / (name + ".png"));
+    EXPECT_EQ(img.width_px, 640);
+    EXPECT_EQ(img.height_px, 480);
+  }
+  EXPECT_FALSE(fs::exists(snaps / "3d_overview.png")) << "--views organs,slices excludes the overview";
+  // Nothing staged is left behind.
+  for (const auto& e : fs::directory_iterator(out.path()))
+    EXPECT_EQ(e.path().filename().string().find("snapshots.staging"), std::string::npos) << e.path();
+
+  EXPECT_EQ(run_cli("snapshot '" + out.path().string() + "' --size 12by7").exit_code, 2);
+  EXPECT_EQ(run_cli("snapshot '" + (out / "absent").string() + "'").exit_code, 3);
+}

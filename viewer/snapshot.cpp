@@ -1,0 +1,629 @@
+// Off-screen snapshot views.
+
+#include "viewer/snapshot.h"
+
+#include "viewer/detail/slice.h"
+#include "viewer/detail/vtk_scene.h"
+
+#include <vtkAxis.h>
+#include <vtkCamera.h>
+#include <vtkCellArray.h>
+#include <vtkChartLegend.h>
+#include <vtkChartXY.h>
+#include <vtkContextActor.h>
+#include <vtkContextScene.h>
+#include <vtkDataSetMapper.h>
+#include <vtkDoubleArray.h>
+#include <vtkImageActor.h>
+#include <vtkImageData.h>
+#include <vtkImageMapper3D.h>
+#include <vtkLookupTable.h>
+#include <vtkPen.h>
+#include <vtkPlot.h>
+#include <vtkPlotPoints.h>
+#include <vtkPoints.h>
+#include <vtkPolyDataMapper.h>
+#include <vtkPolyDataMapper2D.h>
+#include <vtkProperty.h>
+#include <vtkProperty2D.h>
+#include <vtkRendererCollection.h>
+#include <vtkScalarBarActor.h>
+#include <vtkTable.h>
+#include <vtkTextProperty.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <set>
+
+namespace organsmith {
+
+using namespace viewer_detail;
+
+namespace {
+
+const Rgb kDarkText{0.08, 0.09, 0.12};
+const Rgb kGreyText{0.30, 0.32, 0.36};
+const Rgb kLightText{0.95, 0.95, 0.95};
+const Rgb kContourYellow{1.0, 0.88, 0.1};
+
+std::string fmt(const char* f, double v) {
+  char b[64];
+  std::snprintf(b, sizeof b, f, v);
+  return b;
+}
+
+std::string capitalised(std::string s) {
+  if (!s.empty()) s[0] = char(std::toupper(static_cast<unsigned char>(s[0])));
+  return s;
+}
+
+/// The organ colour scaled to full brightness: outlines stay visible over a dark CT.
+Rgb bright(const Rgb& c) {
+  const double m = std::max({c.r, c.g, c.b, 1e-6});
+  return {c.r / m, c.g / m, c.b / m};
+}
+
+bool wants(const SnapshotOptions& o, ViewKind k) { return std::find(o.views.begin(), o.views.end(), k) != o.views.end(); }
+
+/// Organs with at least one non-context surface, in the order they first appear.
+std::vector<std::string> surface_organs(const SnapshotScene& scene) {
+  std::vector<std::string> out;
+  for (const auto& s : scene.surfaces)
+    if (!s.context && std::find(out.begin(), out.end(), s.organ) == out.end()) out.push_back(s.organ);
+  return out;
+}
+
+constexpr SliceAxis kAxes[] = {SliceAxis::axial, SliceAxis::coronal, SliceAxis::sagittal};
+
+struct Layout {
+  int w, h, band;  ///< window size and the height of the title band (px)
+};
+
+Layout layout_of(const SnapshotOptions& o) {
+  return {o.width_px, o.height_px, std::max(48, int(std::lround(o.height_px * 0.105)))};
+}
+
+/// The title band across the top: a title and one line of detail.
+Ptr<vtkRenderer> title_band(const Layout& L, const std::string& title, const std::string& detail, const Rgb& bg,
+                            const Rgb& fg, const Rgb& fg2) {
+  auto r = Ptr<vtkRenderer>::New();
+  r->SetViewport(0, 1.0 - double(L.band) / L.h, 1, 1);
+  r->SetBackground(bg.r, bg.g, bg.b);
+  r->InteractiveOff();
+  const int big = std::max(12, int(L.band * 0.36)), small = std::max(10, int(L.band * 0.22));
+  r->AddViewProp(text(title, big, fg, 0.015 * L.w, L.band * 0.93, 0, 2, true));
+  r->AddViewProp(text(detail, small, fg2, 0.015 * L.w, L.band * 0.10, 0, 0));
+  return r;
+}
+
+Ptr<vtkRenderer> main_area(const Layout& L, double x0, double x1, bool dark) {
+  auto r = Ptr<vtkRenderer>::New();
+  r->SetViewport(x0, 0, x1, 1.0 - double(L.band) / L.h);
+  if (dark) {
+    r->SetBackground(0, 0, 0);
+  } else {
+    r->GradientBackgroundOn();
+    r->SetBackground(0.80, 0.82, 0.86);   // bottom
+    r->SetBackground2(0.98, 0.98, 0.99);  // top
+  }
+  r->SetUseDepthPeeling(1);
+  r->SetMaximumNumberOfPeels(6);
+  r->SetOcclusionRatio(0.0);
+  return r;
+}
+
+/// Coloured swatches with names, top right of a renderer (viewport pixels).
+void add_legend(vtkRenderer* r, const std::vector<std::pair<std::string, Rgb>>& entries, int vw, int vh,
+                const Rgb& text_colour) {
+  const int font = std::max(11, vh / 42);
+  const double line = font * 1.5, sw = font * 0.9;
+  double y = vh - 0.03 * vh - font;
+  for (const auto& [name, colour] : entries) {
+    const double x = vw - 0.27 * vw;
+    auto pts = Ptr<vtkPoints>::New();
+    pts->InsertNextPoint(x, y, 0);
+    pts->InsertNextPoint(x + sw, y, 0);
+    pts->InsertNextPoint(x + sw, y + sw, 0);
+    pts->InsertNextPoint(x, y + sw, 0);
+    auto poly = Ptr<vtkCellArray>::New();
+    const vtkIdType q[4] = {0, 1, 2, 3};
+    poly->InsertNextCell(4, q);
+    auto pd = Ptr<vtkPolyData>::New();
+    pd->SetPoints(pts);
+    pd->SetPolys(poly);
+    auto m = Ptr<vtkPolyDataMapper2D>::New();
+    m->SetInputData(pd);
+    auto a = Ptr<vtkActor2D>::New();
+    a->SetMapper(m);
+    a->GetProperty()->SetColor(colour.r, colour.g, colour.b);
+    r->AddViewProp(a);
+    r->AddViewProp(text(name, font, text_colour, x + sw * 1.6, y + sw * 0.5, 0, 1));
+    y -= line;
+  }
+}
+
+double mm_per_px(vtkRenderer* r, int viewport_h_px) {
+  return 2.0 * r->GetActiveCamera()->GetParallelScale() / viewport_h_px;
+}
+
+/// Line segments along the pixel edges between `organ` and everything else: the exact voxel
+/// outline, crisp at any zoom. Points are in the slice's (s, t) plane coordinates at height z.
+Ptr<vtkPolyData> label_outline(const SliceSample& s, std::uint8_t organ, double z) {
+  auto pts = Ptr<vtkPoints>::New();
+  auto lines = Ptr<vtkCellArray>::New();
+  auto in = [&](int x, int y) {
+    return x >= 0 && y >= 0 && x < s.width && y < s.height && s.labels[std::size_t(y) * s.width + x] == organ;
+  };
+  const double h = s.pixel_mm;
+  auto seg = [&](double xa, double ya, double xb, double yb) {
+    const vtkIdType a = pts->InsertNextPoint(s.s0 + xa * h, s.t0 + ya * h, z);
+    const vtkIdType b = pts->InsertNextPoint(s.s0 + xb * h, s.t0 + yb * h, z);
+    const vtkIdType ids[2] = {a, b};
+    lines->InsertNextCell(2, ids);
+  };
+  if (!s.labels.empty())
+    for (int y = -1; y < s.height; ++y)
+      for (int x = -1; x < s.width; ++x) {
+        const bool c = in(x, y);
+        if (c != in(x + 1, y)) seg(x + 0.5, y - 0.5, x + 0.5, y + 0.5);
+        if (c != in(x, y + 1)) seg(x - 0.5, y + 0.5, x + 0.5, y + 0.5);
+      }
+  auto pd = Ptr<vtkPolyData>::New();
+  pd->SetPoints(pts);
+  pd->SetLines(lines);
+  return pd;
+}
+
+Ptr<vtkActor> line_actor(vtkPolyData* pd, const Rgb& c, double width) {
+  auto m = Ptr<vtkPolyDataMapper>::New();
+  m->SetInputData(pd);
+  m->ScalarVisibilityOff();
+  auto a = Ptr<vtkActor>::New();
+  a->SetMapper(m);
+  a->GetProperty()->SetColor(c.r, c.g, c.b);
+  a->GetProperty()->SetLineWidth(float(width));
+  a->GetProperty()->LightingOff();
+  return a;
+}
+
+}  // namespace
+
+ViewKind parse_view_kind(const std::string& name) {
+  if (name == "organs") return ViewKind::organ_3d;
+  if (name == "overview") return ViewKind::overview_3d;
+  if (name == "slices") return ViewKind::slices;
+  if (name == "tets") return ViewKind::tets;
+  if (name == "plots") return ViewKind::plots;
+  throw UsageError("unknown view '" + name + "'", "use organs, overview, slices, tets or plots");
+}
+
+std::vector<std::string> snapshot_view_names(const SnapshotScene& scene, const SnapshotOptions& o) {
+  std::vector<std::string> names;
+  if (wants(o, ViewKind::organ_3d))
+    for (const auto& organ : surface_organs(scene)) names.push_back("3d_" + organ);
+  if (wants(o, ViewKind::overview_3d) && (!scene.surfaces.empty() || !scene.paths.empty()))
+    names.push_back("3d_overview");
+  if (wants(o, ViewKind::slices) && scene.ct)
+    for (const auto& organ : scene.organs) {
+      Eigen::Vector3d c;
+      if (!scene.labels || !label_centroid(*scene.labels, organ.label, c)) continue;
+      for (const auto a : kAxes) names.push_back("slice_" + organ.name + "_" + slice_axis_name(a));
+    }
+  if (wants(o, ViewKind::tets))
+    for (const auto& t : scene.tet_meshes)
+      if (!t.mesh.tets.empty()) names.push_back("tets_" + t.organ);
+  if (wants(o, ViewKind::plots))
+    for (const auto& p : scene.plots) names.push_back("plot_" + p.name);
+  return names;
+}
+
+struct SnapshotRenderer::Impl {
+  SnapshotOptions opt;
+  DisplaySession display;
+  Ptr<vtkRenderWindow> window;
+
+  explicit Impl(const SnapshotOptions& o) : opt(o), display(o.display) {
+    if (o.width_px < 64 || o.height_px < 64 || o.width_px > 8192 || o.height_px > 8192)
+      throw UsageError("snapshot size " + std::to_string(o.width_px) + "x" + std::to_string(o.height_px) +
+                           " is out of range", "use a size between 64x64 and 8192x8192");
+    window = make_window(display.x_display(), o.width_px, o.height_px, /*offscreen=*/true);
+  }
+
+  void clear() {
+    vtkRendererCollection* rc = window->GetRenderers();
+    while (rc->GetNumberOfItems() > 0) window->RemoveRenderer(rc->GetFirstRenderer());
+  }
+
+  void view_3d(const SnapshotScene& scene, const std::string& organ) {
+    const Layout L = layout_of(opt);
+    const bool overview = organ.empty();
+    auto r = main_area(L, 0, 1, false);
+    std::vector<std::pair<std::string, Rgb>> legend;
+    std::size_t triangles = 0;
+    std::set<std::string> sources;
+    for (const auto& s : scene.surfaces) {
+      if (overview ? false : (s.context || s.organ != organ)) continue;
+      r->AddViewProp(surface_actor(s));
+      triangles += s.mesh.triangles.size();
+      if (!s.source.empty() && !s.context) sources.insert(s.source);
+      legend.emplace_back(s.name + (s.context ? " (context)" : s.opacity < 1 ? " (translucent)" : ""), s.colour);
+    }
+    for (const auto& p : scene.paths)
+      if (overview || p.line.name.find(organ) != std::string::npos) {
+        r->AddViewProp(path_actor(p));
+        legend.emplace_back((p.line.name.empty() ? std::string("path") : p.line.name) + " (path)", p.colour);
+      }
+    std::array<double, 6> b{};
+    const bool any = visible_bounds(r, b);
+    if (overview && scene.tool) {
+      const double len = any ? 0.12 * std::max({b[1] - b[0], b[3] - b[2], b[5] - b[4]}) : 20.0;
+      for (auto& p : tool_props(*scene.tool, len, Rgb{0.2, 0.75, 0.95})) r->AddViewProp(p);
+      legend.emplace_back("tool", Rgb{0.2, 0.75, 0.95});
+      if (scene.tool->force_N) legend.emplace_back("force " + fmt("%.2f N", scene.tool->force_N->norm()), Rgb{0.85, 0.1, 0.1});
+      visible_bounds(r, b);
+    }
+    const int vh = L.h - L.band;
+    if (any) {
+      fit_parallel_camera(r, b, anterior_view(30, 20), Eigen::Vector3d(0, 0, 1), double(L.w) / vh, 0.10);
+      add_scale_bar(r, mm_per_px(r, vh), L.w, vh, kDarkText);
+    }
+    add_legend(r, legend, L.w, vh, kDarkText);
+    r->AddViewProp(text("front view turned 30 deg to the patient's left, 20 deg from above; parallel projection",
+                        std::max(10, vh / 52), kGreyText, L.w - 0.015 * L.w, 0.02 * vh, 2, 0));
+    std::string src;
+    for (const auto& s : sources) src += (src.empty() ? "" : ", ") + s;
+    const std::string title =
+        overview ? "All organs" + std::string(scene.paths.empty() ? "" : " with guidance paths") : capitalised(organ) + " - 3D model";
+    std::string detail = (scene.case_name.empty() ? "" : "case " + scene.case_name + "  |  ") +
+                         std::to_string(triangles) + " triangles";
+    if (!src.empty()) detail += "  |  surfaces: " + src;
+    window->AddRenderer(title_band(L, title, detail, Rgb{1, 1, 1}, kDarkText, kGreyText));
+    window->AddRenderer(r);
+  }
+
+  void view_slice(const SnapshotScene& scene, const SceneOrgan& organ, SliceAxis axis) {
+    const Layout L = layout_of(opt);
+    Eigen::Vector3d centre;
+    label_centroid(*scene.labels, organ.label, centre);
+    const SliceSample s = sample_slice(*scene.ct, scene.labels, axis, centre);
+
+    // CT in the HU window as grey RGB.
+    auto img = Ptr<vtkImageData>::New();
+    img->SetDimensions(s.width, s.height, 1);
+    img->SetSpacing(s.pixel_mm, s.pixel_mm, 1);
+    img->SetOrigin(s.s0, s.t0, 0);
+    img->AllocateScalars(VTK_UNSIGNED_CHAR, 3);
+    auto* px = static_cast<unsigned char*>(img->GetScalarPointer());
+    const double lo = opt.hu_level - opt.hu_window / 2, span = std::max(1.0, opt.hu_window);
+    for (std::size_t i = 0; i < s.hu.size(); ++i) {
+      const float v = s.hu[i];
+      unsigned char g = 0;
+      if (std::isnan(v)) {
+        px[3 * i] = 20, px[3 * i + 1] = 20, px[3 * i + 2] = 40;  // outside the scan: dark blue
+        continue;
+      }
+      g = (unsigned char)std::lround(std::clamp((v - lo) / span, 0.0, 1.0) * 255.0);
+      px[3 * i] = px[3 * i + 1] = px[3 * i + 2] = g;
+    }
+
+    // The close-up: the organ's outline in this plane, framed generously.
+    double xmin = 1e300, xmax = -1e300, ymin = 1e300, ymax = -1e300;
+    for (int y = 0; y < s.height; ++y)
+      for (int x = 0; x < s.width; ++x)
+        if (!s.labels.empty() && s.labels[std::size_t(y) * s.width + x] == organ.label) {
+          xmin = std::min(xmin, s.s0 + x * s.pixel_mm), xmax = std::max(xmax, s.s0 + x * s.pixel_mm);
+          ymin = std::min(ymin, s.t0 + y * s.pixel_mm), ymax = std::max(ymax, s.t0 + y * s.pixel_mm);
+        }
+    double cx = 0, cy = 0, side = opt.closeup_min_mm;
+    if (xmax >= xmin) {
+      cx = (xmin + xmax) / 2, cy = (ymin + ymax) / 2;
+      side = std::max(side, 1.6 * std::max(xmax - xmin, ymax - ymin));
+    }
+
+    const double split = 0.42;
+    const int vh = L.h - L.band, left_w = int(std::lround(split * L.w)), right_w = L.w - left_w;
+    const Rgb outline = bright(organ_colour(organ.name));
+    auto outline_pd = label_outline(s, organ.label, 0.5);
+
+    // Segmentation contours of this organ on the axial slice nearest to the plane.
+    Ptr<vtkPolyData> contour_pd;
+    if (axis == SliceAxis::axial)
+      for (const auto& stack : scene.contours) {
+        if (stack.organ != organ.name || stack.contours.empty()) continue;
+        const Eigen::Vector3d k_centre = scene.ct->grid.lps_mm_to_index(centre);
+        const std::int64_t k = std::llround(k_centre.z());
+        auto pts = Ptr<vtkPoints>::New();
+        auto lines = Ptr<vtkCellArray>::New();
+        for (const auto& c : stack.contours) {
+          if (c.slice_k != k || c.points_lps_mm.size() < 2) continue;
+          const auto n = vtkIdType(c.points_lps_mm.size());
+          lines->InsertNextCell(n + (c.closed ? 1 : 0));
+          const vtkIdType first = pts->GetNumberOfPoints();
+          for (const auto& p : c.points_lps_mm) {
+            const Eigen::Vector3d q = p - centre;
+            lines->InsertCellPoint(pts->InsertNextPoint(q.dot(s.frame.right), q.dot(s.frame.up), 0.6));
+          }
+          if (c.closed) lines->InsertCellPoint(first);
+        }
+        if (lines->GetNumberOfCells() > 0) {
+          contour_pd = Ptr<vtkPolyData>::New();
+          contour_pd->SetPoints(pts);
+          contour_pd->SetLines(lines);
+        }
+      }
+
+    auto make_panel = [&](double x0, double x1, int vw, bool closeup) {
+      auto r = main_area(L, x0, x1, true);
+      auto actor = Ptr<vtkImageActor>::New();
+      actor->GetMapper()->SetInputData(img);
+      actor->InterpolateOff();
+      r->AddViewProp(actor);
+      r->AddViewProp(line_actor(outline_pd, outline, closeup ? 2.5 : 1.5));
+      if (contour_pd) r->AddViewProp(line_actor(contour_pd, kContourYellow, closeup ? 2.0 : 1.0));
+      std::array<double, 6> b{};
+      if (closeup) {
+        const double aspect = double(vw) / vh;
+        const double hh = side / 2, hw = hh * aspect;
+        b = {cx - hw, cx + hw, cy - hh, cy + hh, -1, 1};
+      } else {
+        b = {s.s0 - s.pixel_mm / 2, s.s0 + (s.width - 0.5) * s.pixel_mm, s.t0 - s.pixel_mm / 2,
+             s.t0 + (s.height - 0.5) * s.pixel_mm, -1, 1};
+        // Frame of the close-up.
+        const double aspect = double(right_w) / vh, hh = side / 2, hw = hh * aspect;
+        auto pts = Ptr<vtkPoints>::New();
+        pts->InsertNextPoint(cx - hw, cy - hh, 0.7);
+        pts->InsertNextPoint(cx + hw, cy - hh, 0.7);
+        pts->InsertNextPoint(cx + hw, cy + hh, 0.7);
+        pts->InsertNextPoint(cx - hw, cy + hh, 0.7);
+        auto lines = Ptr<vtkCellArray>::New();
+        const vtkIdType ids[5] = {0, 1, 2, 3, 0};
+        lines->InsertNextCell(5, ids);
+        auto pd = Ptr<vtkPolyData>::New();
+        pd->SetPoints(pts);
+        pd->SetLines(lines);
+        r->AddViewProp(line_actor(pd, Rgb{0.3, 0.8, 1.0}, 1.5));
+      }
+      fit_parallel_camera(r, b, Eigen::Vector3d(0, 0, -1), Eigen::Vector3d(0, 1, 0), double(vw) / vh,
+                          closeup ? 0.0 : 0.04);
+      add_scale_bar(r, mm_per_px(r, vh), vw, vh, kLightText);
+      const int f = std::max(11, vh / 36);
+      r->AddViewProp(text(std::string(1, direction_letter(-s.frame.right)), f, kLightText, 0.02 * vw, vh / 2.0, 0, 1, true));
+      r->AddViewProp(text(std::string(1, direction_letter(s.frame.right)), f, kLightText, 0.98 * vw, vh / 2.0, 2, 1, true));
+      r->AddViewProp(text(std::string(1, direction_letter(s.frame.up)), f, kLightText, vw / 2.0, vh - 0.02 * vh, 1, 2, true));
+      r->AddViewProp(text(std::string(1, direction_letter(-s.frame.up)), f, kLightText, vw / 2.0, 0.02 * vh, 1, 0, true));
+      r->AddViewProp(text(closeup ? "close-up" : "whole slice", std::max(10, vh / 48), Rgb{0.3, 0.8, 1.0}, 0.02 * vw,
+                          vh - 0.02 * vh, 0, 2));
+      return r;
+    };
+
+    const int axis_index = axis == SliceAxis::axial ? 2 : axis == SliceAxis::coronal ? 1 : 0;
+    const char* axis_letter = axis == SliceAxis::axial ? "S" : axis == SliceAxis::coronal ? "P" : "L";
+    std::string detail = (scene.case_name.empty() ? "" : scene.case_name + "  |  ") + axis_letter + " = " +
+                         fmt("%.1f mm", centre[axis_index]) + " (LPS)  |  W " + fmt("%.0f", opt.hu_window) + " / L " +
+                         fmt("%.0f", opt.hu_level) + " HU  |  outline: " +
+                         (scene.labels_source.empty() ? std::string("label map") : scene.labels_source) + " voxels";
+    if (contour_pd) detail += ", yellow: its contour";
+    window->AddRenderer(title_band(L, capitalised(organ.name) + " - " + slice_axis_name(axis) + " slice through its centroid",
+                                   detail, Rgb{0.06, 0.06, 0.08}, kLightText, Rgb{0.75, 0.76, 0.8}));
+    window->AddRenderer(make_panel(0, split, left_w, false));
+    window->AddRenderer(make_panel(split, 1, right_w, true));
+  }
+
+  void view_tets(const SnapshotScene&, const SceneTetMesh& t) {
+    const Layout L = layout_of(opt);
+    const TetMesh& m = t.mesh;
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (const auto& v : m.vertices_lps_mm) centre += v;
+    if (!m.vertices_lps_mm.empty()) centre /= double(m.vertices_lps_mm.size());
+    // Keep the posterior half (tet centroid behind the coronal plane through the centre): the
+    // camera in front then looks onto the cut.
+    std::vector<std::int32_t> keep;
+    std::vector<double> all_q;
+    all_q.reserve(m.tets.size());
+    for (std::size_t i = 0; i < m.tets.size(); ++i) {
+      const auto& tet = m.tets[i];
+      const Eigen::Vector3d c = (m.vertices_lps_mm[tet[0]] + m.vertices_lps_mm[tet[1]] + m.vertices_lps_mm[tet[2]] +
+                                 m.vertices_lps_mm[tet[3]]) / 4.0;
+      if (c.y() >= centre.y()) keep.push_back(std::int32_t(i));
+      all_q.push_back(tet_radius_ratio(m.vertices_lps_mm[tet[0]], m.vertices_lps_mm[tet[1]], m.vertices_lps_mm[tet[2]],
+                                       m.vertices_lps_mm[tet[3]]));
+    }
+    auto grid = to_grid(m, keep);
+    auto lut = Ptr<vtkLookupTable>::New();
+    lut->SetTableRange(0, 1);
+    lut->SetHueRange(0.0, 0.33);  // red (poor) → green (regular)
+    lut->SetSaturationRange(0.85, 0.85);
+    lut->SetValueRange(0.95, 0.95);
+    lut->SetNumberOfTableValues(256);
+    lut->Build();
+    auto mapper = Ptr<vtkDataSetMapper>::New();
+    mapper->SetInputData(grid);
+    mapper->SetLookupTable(lut);
+    mapper->SetScalarModeToUseCellData();
+    mapper->SetScalarRange(0, 1);
+    mapper->ScalarVisibilityOn();
+    auto actor = Ptr<vtkActor>::New();
+    actor->SetMapper(mapper);
+    actor->GetProperty()->EdgeVisibilityOn();
+    actor->GetProperty()->SetEdgeColor(0.15, 0.15, 0.18);
+    actor->GetProperty()->SetLineWidth(1.0);
+    actor->GetProperty()->SetAmbient(0.3);
+    auto r = main_area(L, 0, 1, false);
+    r->AddViewProp(actor);
+    const int vh = L.h - L.band;
+    std::array<double, 6> b{};
+    if (visible_bounds(r, b)) {
+      fit_parallel_camera(r, b, anterior_view(25, 20), Eigen::Vector3d(0, 0, 1), double(L.w) / vh, 0.12);
+      add_scale_bar(r, mm_per_px(r, vh), L.w, vh, kDarkText);
+    }
+    auto bar = Ptr<vtkScalarBarActor>::New();
+    bar->SetLookupTable(lut);
+    bar->SetTitle("3 r_in / R_circ");
+    bar->SetNumberOfLabels(6);
+    bar->SetLabelFormat("%.1f");
+    bar->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
+    bar->GetPositionCoordinate()->SetValue(0.89, 0.12);
+    bar->SetWidth(0.09);
+    bar->SetHeight(0.76);
+    bar->UnconstrainedFontSizeOn();
+    bar->GetTitleTextProperty()->SetColor(kDarkText.r, kDarkText.g, kDarkText.b);
+    bar->GetTitleTextProperty()->SetFontSize(std::max(10, vh / 45));
+    bar->GetTitleTextProperty()->ItalicOff();
+    bar->GetTitleTextProperty()->ShadowOff();
+    bar->GetLabelTextProperty()->SetColor(kDarkText.r, kDarkText.g, kDarkText.b);
+    bar->GetLabelTextProperty()->SetFontSize(std::max(10, vh / 50));
+    bar->GetLabelTextProperty()->ItalicOff();
+    bar->GetLabelTextProperty()->ShadowOff();
+    r->AddViewProp(bar);
+    std::vector<double> sorted = all_q;
+    std::sort(sorted.begin(), sorted.end());
+    const double qmin = sorted.empty() ? 0 : sorted.front(), qmed = sorted.empty() ? 0 : sorted[sorted.size() / 2];
+    r->AddViewProp(text("cut: coronal plane P = " + fmt("%.1f mm", centre.y()) + ", front half removed; whole tets shown",
+                        std::max(10, vh / 52), kGreyText, L.w - 0.015 * L.w, 0.02 * vh, 2, 0));
+    const std::string detail = std::to_string(m.tets.size()) + " tets (" + std::to_string(keep.size()) +
+                               " shown)  |  radius ratio 3 r_in / R_circ (1 = regular): min " + fmt("%.3f", qmin) +
+                               ", median " + fmt("%.3f", qmed);
+    window->AddRenderer(title_band(L, capitalised(t.organ) + " - tetrahedral mesh, cut, coloured by quality", detail,
+                                   Rgb{1, 1, 1}, kDarkText, kGreyText));
+    window->AddRenderer(r);
+  }
+
+  void view_plot(const Plot& p) {
+    const Layout L = layout_of(opt);
+    auto r = Ptr<vtkRenderer>::New();
+    r->SetViewport(0, 0, 1, 1.0 - double(L.band) / L.h);
+    r->SetBackground(1, 1, 1);
+    auto chart = Ptr<vtkChartXY>::New();
+    const int vh = L.h - L.band;
+    const int font = std::max(11, vh / 40);
+    for (const auto& sr : p.series) {
+      auto table = Ptr<vtkTable>::New();
+      auto x = Ptr<vtkDoubleArray>::New();
+      x->SetName(p.x_label.empty() ? "x" : p.x_label.c_str());
+      auto y = Ptr<vtkDoubleArray>::New();
+      y->SetName(sr.name.empty() ? "y" : sr.name.c_str());
+      const std::size_t n = std::min(sr.x.size(), sr.y.size());
+      for (std::size_t i = 0; i < n; ++i) {
+        x->InsertNextValue(sr.x[i]);
+        y->InsertNextValue(sr.y[i]);
+      }
+      table->AddColumn(x);
+      table->AddColumn(y);
+      vtkPlot* plot = chart->AddPlot(sr.points ? vtkChart::POINTS : vtkChart::LINE);
+      plot->SetInputData(table, 0, 1);
+      plot->SetColor((unsigned char)std::lround(sr.colour.r * 255), (unsigned char)std::lround(sr.colour.g * 255),
+                     (unsigned char)std::lround(sr.colour.b * 255), 255);
+      plot->SetWidth(sr.points ? 1.0f : 2.5f);
+      if (auto* pp = vtkPlotPoints::SafeDownCast(plot); pp && sr.points) {
+        pp->SetMarkerStyle(vtkPlotPoints::CIRCLE);
+        pp->SetMarkerSize(8);
+      }
+      plot->SetLabel(sr.name);
+    }
+    chart->GetAxis(vtkAxis::BOTTOM)->SetTitle(p.x_label);
+    chart->GetAxis(vtkAxis::LEFT)->SetTitle(p.y_label);
+    for (int a : {vtkAxis::BOTTOM, vtkAxis::LEFT}) {
+      chart->GetAxis(a)->GetTitleProperties()->SetFontSize(font);
+      chart->GetAxis(a)->GetLabelProperties()->SetFontSize(font - 2);
+      chart->GetAxis(a)->GetTitleProperties()->BoldOff();
+    }
+    chart->SetShowLegend(true);
+    chart->GetLegend()->SetLabelSize(font - 1);
+    chart->GetLegend()->SetHorizontalAlignment(vtkChartLegend::LEFT);
+    chart->GetLegend()->SetVerticalAlignment(vtkChartLegend::TOP);
+    auto actor = Ptr<vtkContextActor>::New();
+    actor->GetScene()->AddItem(chart);
+    r->AddViewProp(actor);
+    std::size_t points = 0;
+    for (const auto& sr : p.series) points += std::min(sr.x.size(), sr.y.size());
+    window->AddRenderer(title_band(L, p.title.empty() ? p.name : p.title,
+                                   std::to_string(p.series.size()) + " series, " + std::to_string(points) + " points",
+                                   Rgb{1, 1, 1}, kDarkText, kGreyText));
+    window->AddRenderer(r);
+  }
+
+  SnapshotRenderer::FrameTimes times;
+
+  RgbImage render(const SnapshotScene& scene, const std::string& name) {
+    using Clock = std::chrono::steady_clock;
+    const auto t0 = Clock::now();
+    clear();
+    bool built = false;
+    if (name == "3d_overview") {
+      view_3d(scene, "");
+      built = true;
+    } else if (name.rfind("3d_", 0) == 0) {
+      view_3d(scene, name.substr(3));
+      built = true;
+    } else if (name.rfind("slice_", 0) == 0 && scene.ct && scene.labels) {
+      for (const auto& organ : scene.organs)
+        for (const auto a : kAxes)
+          if (!built && name == "slice_" + organ.name + "_" + slice_axis_name(a)) {
+            view_slice(scene, organ, a);
+            built = true;
+          }
+    } else if (name.rfind("tets_", 0) == 0) {
+      for (const auto& t : scene.tet_meshes)
+        if (!built && name == "tets_" + t.organ) {
+          view_tets(scene, t);
+          built = true;
+        }
+    } else if (name.rfind("plot_", 0) == 0) {
+      for (const auto& p : scene.plots)
+        if (!built && name == "plot_" + p.name) {
+          view_plot(p);
+          built = true;
+        }
+    }
+    if (!built) throw UsageError("no view named '" + name + "' in this scene", "see snapshot_view_names()");
+    const auto t1 = Clock::now();
+    window->Render();
+    const auto t2 = Clock::now();
+    RgbImage img = grab(window);
+    const auto t3 = Clock::now();
+    clear();  // release the scene's buffers between views
+    auto ms = [](auto a, auto b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
+    times = {ms(t0, t1), ms(t1, t2), ms(t2, t3)};
+    return img;
+  }
+};
+
+SnapshotRenderer::SnapshotRenderer(const SnapshotOptions& options) : impl_(std::make_unique<Impl>(options)) {}
+SnapshotRenderer::~SnapshotRenderer() = default;
+
+RgbImage SnapshotRenderer::render(const SnapshotScene& scene, const std::string& name) {
+  return impl_->render(scene, name);
+}
+
+void SnapshotRenderer::render_to_png(const SnapshotScene& scene, const std::string& name,
+                                     const std::filesystem::path& png) {
+  write_png(render(scene, name), png);
+}
+
+SnapshotRenderer::FrameTimes SnapshotRenderer::last_frame_times() const { return impl_->times; }
+
+const DisplaySession& SnapshotRenderer::display() const { return impl_->display; }
+
+std::vector<std::filesystem::path> render_snapshots(const SnapshotScene& scene, const SnapshotOptions& options,
+                                                    const std::filesystem::path& dir, Progress& progress) {
+  const auto names = snapshot_view_names(scene, options);
+  std::vector<std::filesystem::path> written;
+  if (names.empty()) return written;
+  std::error_code ec;
+  std::filesystem::create_directories(dir, ec);
+  if (ec) throw OutputError("cannot create the snapshot directory: " + ec.message(), dir);
+  SnapshotRenderer renderer(options);
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    progress.check_cancelled();
+    progress.report(double(i) / double(names.size()), "rendering " + names[i]);
+    const auto path = dir / (names[i] + ".png");
+    renderer.render_to_png(scene, names[i], path);
+    written.push_back(path);
+  }
+  progress.report(1.0, "snapshots rendered");
+  return written;
+}
+
+}  // namespace organsmith
