@@ -1,0 +1,100 @@
+#include "segmentation/presets.h"
+
+#include "core/errors.h"
+#include "organs_toml.h"
+
+#include <toml++/toml.h>
+
+namespace organsmith {
+
+std::string_view default_organ_presets_toml() { return kOrgansToml; }
+
+namespace {
+
+void get(const toml::table& t, const std::string& organ, const char* key, double& v) {
+  const toml::node* n = t.get(key);
+  if (!n) return;
+  if (auto d = n->value<double>()) v = *d;
+  else throw CaseFileError("organ preset '" + organ + "." + key + "' must be a number", {});
+}
+void get(const toml::table& t, const std::string& organ, const char* key, int& v) {
+  double d = v;
+  get(t, organ, key, d);
+  v = int(d);
+}
+void get(const toml::table& t, const std::string& organ, const char* key, bool& v) {
+  const toml::node* n = t.get(key);
+  if (!n) return;
+  if (auto b = n->value<bool>()) v = *b;
+  else throw CaseFileError("organ preset '" + organ + "." + key + "' must be true or false", {});
+}
+void get_range(const toml::table& t, const std::string& organ, const char* key, double& lo, double& hi) {
+  const toml::node* n = t.get(key);
+  if (!n) return;
+  const toml::array* a = n->as_array();
+  if (!a || a->size() != 2 || !(*a)[0].value<double>() || !(*a)[1].value<double>() ||
+      *(*a)[0].value<double>() > *(*a)[1].value<double>())
+    throw CaseFileError("organ preset '" + organ + "." + key + "' must be [low, high]", {});
+  lo = *(*a)[0].value<double>();
+  hi = *(*a)[1].value<double>();
+}
+
+}  // namespace
+
+std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, std::map<std::string, OrganPreset> base) {
+  toml::table root;
+  try {
+    root = toml::parse(text);
+  } catch (const toml::parse_error& e) {
+    throw CaseFileError(std::string("organ presets are not valid TOML: ") + std::string(e.description()), {});
+  }
+  for (auto&& [k, node] : root) {
+    const std::string organ(k.str());
+    const toml::table* t = node.as_table();
+    if (!t) throw CaseFileError("organ preset '" + organ + "' must be a table", {});
+    OrganPreset& p = base[organ];
+    p.organ = organ;
+    int label = p.label;
+    get(*t, organ, "label", label);
+    if (label < 1 || label > 255) throw CaseFileError("organ preset '" + organ + ".label' must be 1–255", {});
+    p.label = std::uint8_t(label);
+    get(*t, organ, "needs_seed", p.needs_seed);
+    get_range(*t, organ, "seed_hu_range", p.seed_hu_lo, p.seed_hu_hi);
+    get(*t, organ, "seed_radius_mm", p.seed_radius_mm);
+    get(*t, organ, "region_below_hu", p.region_below_hu);
+    get(*t, organ, "region_above_hu", p.region_above_hu);
+    get(*t, organ, "air_hu", p.air_hu);
+    get(*t, organ, "pressure_ramp_hu", p.pressure_ramp_hu);
+    get(*t, organ, "region_sigma_mm", p.region_sigma_mm);
+    get(*t, organ, "region_sigma_px", p.region_sigma_px);
+    get(*t, organ, "region_open_mm", p.region_open_mm);
+    get(*t, organ, "region_open_fraction", p.region_open_fraction);
+    get_range(*t, organ, "edge_window_hu", p.edge_window_lo_hu, p.edge_window_hi_hu);
+    get(*t, organ, "edge_sigma_mm", p.edge_sigma_mm);
+    get(*t, organ, "edge_stop", p.edge_stop);
+    get(*t, organ, "min_area_mm2", p.min_area_mm2);
+    get(*t, organ, "max_area_mm2", p.max_area_mm2);
+    get(*t, organ, "max_area_ratio", p.max_area_ratio);
+    get(*t, organ, "max_mean_drift_hu", p.max_mean_drift_hu);
+    get(*t, organ, "min_fill", p.min_fill);
+    get(*t, organ, "max_aspect", p.max_aspect);
+    get(*t, organ, "max_midline_offset_mm", p.max_midline_offset_mm);
+    get(*t, organ, "min_length_mm", p.min_length_mm);
+    get(*t, organ, "start_radius_mm", p.start_radius_mm);
+    get(*t, organ, "roi_margin_mm", p.roi_margin_mm);
+    get(*t, organ, "alpha", p.alpha);
+    get(*t, organ, "beta", p.beta);
+    get(*t, organ, "kappa", p.kappa);
+    get(*t, organ, "balloon", p.balloon);
+    get(*t, organ, "point_spacing_mm", p.point_spacing_mm);
+    get(*t, organ, "gvf_mu", p.gvf_mu);
+    get(*t, organ, "max_iterations", p.max_iterations);
+    if (p.point_spacing_mm <= 0 || p.gvf_mu <= 0 || p.max_iterations < 1 || p.pressure_ramp_hu <= 0)
+      throw CaseFileError("organ preset '" + organ + "': point_spacing_mm, gvf_mu, pressure_ramp_hu and max_iterations must be positive", {});
+  }
+  return base;
+}
+
+std::map<std::string, OrganPreset> default_organ_presets() { return parse_organ_presets(kOrgansToml); }
+
+}  // namespace organsmith

@@ -1,0 +1,54 @@
+#pragma once
+// Organ presets: HU windows, snake parameters and anatomical size limits per organ. The defaults
+// come from data/organs.toml (embedded at build time, with the sources of its numbers); a case
+// file may override any key.
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <string_view>
+
+namespace organsmith {
+
+struct OrganPreset {
+  std::string organ;
+  std::uint8_t label = 0;
+  bool needs_seed = true;
+  double seed_hu_lo = -30, seed_hu_hi = 40;   ///< HU range a seed's neighbourhood must have
+  double seed_radius_mm = 4;                  ///< radius of that neighbourhood, mm
+  double region_below_hu = 50, region_above_hu = 22;  ///< pressure window around the organ mean, HU
+  double air_hu = -500;                       ///< lumen threshold (airways), HU
+  double pressure_ramp_hu = 8;                ///< HU over which the pressure goes from 0 to ±1
+  double region_sigma_mm = 2;                 ///< smoothing before the region test, mm (at least)
+  double region_sigma_px = 0;                 ///< …and at least this many pixels
+  double region_open_mm = 0;                  ///< radius of the opening that removes thin partial-volume bands, mm
+  double region_open_fraction = 0;            ///< …at least this fraction of the organ's equivalent radius
+  double edge_window_lo_hu = -150, edge_window_hi_hu = 150;
+  double edge_sigma_mm = 1.5;
+  double edge_stop = 0;                       ///< edge-map value (0–1) at which the outward pressure halves; 0 = off
+  double min_area_mm2 = 15, max_area_mm2 = 2600;  ///< per-slice lumen/organ area limits, mm²
+  double max_area_ratio = 1.8;                ///< largest area ratio between neighbouring slices
+  double max_mean_drift_hu = 25;              ///< propagation stops beyond this drift of the mean
+  double min_fill = 0.55, max_aspect = 2.2;   ///< roundness tests of airway candidates
+  double max_midline_offset_mm = 40;          ///< airway candidates: distance from the body midline
+  double min_length_mm = 20;                  ///< airway candidates: shortest run along the body
+  double start_radius_mm = 3;                 ///< radius of the initial snake, mm
+  double roi_margin_mm = 30;                  ///< margin of the per-slice working window, mm
+  double alpha = 0.6, beta = 0.3, kappa = 0.4, balloon = 0.5;  ///< snake (see SnakeOptions)
+  double point_spacing_mm = 1.5;
+  double gvf_mu = 0.2;
+  int max_iterations = 300;
+};
+
+/// The embedded data/organs.toml.
+std::string_view default_organ_presets_toml();
+
+/// Parses presets from TOML text (one table per organ). Tables and keys absent from `text` keep
+/// the values in `base`. Throws CaseFileError naming the key when a value has the wrong type.
+std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text,
+                                                       std::map<std::string, OrganPreset> base = {});
+
+/// The embedded presets (parsed once per call; cheap).
+std::map<std::string, OrganPreset> default_organ_presets();
+
+}  // namespace organsmith

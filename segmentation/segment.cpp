@@ -1,0 +1,626 @@
+#include "segmentation/segment.h"
+
+#include "segmentation/edge_map.h"
+#include "segmentation/gvf.h"
+#include "segmentation/presets.h"
+#include "segmentation/slice_ops.h"
+#include "segmentation/snake.h"
+
+#include <nlohmann/json.hpp>
+#include <opencv2/core.hpp>
+#include <opencv2/imgproc.hpp>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <numeric>
+
+namespace organsmith {
+
+using seg::Image2f;
+using seg::Point2;
+
+namespace {
+
+std::string fmt_mm(const Eigen::Vector3d& p) {
+  char b[96];
+  std::snprintf(b, sizeof b, "(%.1f, %.1f, %.1f) mm LPS", p.x(), p.y(), p.z());
+  return b;
+}
+
+struct Roi {
+  int x0 = 0, y0 = 0, w = 0, h = 0;
+};
+
+/// Everything the per-slice fit needs about the volume.
+struct SliceCtx {
+  const Volume& vol;
+  int W, H;
+  double sx, sy;
+  explicit SliceCtx(const Volume& v)
+      : vol(v), W(int(v.grid.size_vox[0])), H(int(v.grid.size_vox[1])), sx(v.grid.spacing_mm.x()),
+        sy(v.grid.spacing_mm.y()) {}
+};
+
+Roi roi_around(const SliceCtx& c, const std::vector<Point2>& pts, double margin_mm) {
+  double xmin = 1e300, xmax = -1e300, ymin = 1e300, ymax = -1e300;
+  for (const auto& p : pts) {
+    xmin = std::min(xmin, p.x), xmax = std::max(xmax, p.x);
+    ymin = std::min(ymin, p.y), ymax = std::max(ymax, p.y);
+  }
+  Roi r;
+  r.x0 = std::clamp(int(std::floor((xmin - margin_mm) / c.sx)), 0, c.W - 1);
+  r.y0 = std::clamp(int(std::floor((ymin - margin_mm) / c.sy)), 0, c.H - 1);
+  const int x1 = std::clamp(int(std::ceil((xmax + margin_mm) / c.sx)), 0, c.W - 1);
+  const int y1 = std::clamp(int(std::ceil((ymax + margin_mm) / c.sy)), 0, c.H - 1);
+  r.w = x1 - r.x0 + 1;
+  r.h = y1 - r.y0 + 1;
+  return r;
+}
+
+std::vector<float> crop(const SliceCtx& c, std::int64_t k, const Roi& r) {
+  std::vector<float> out(std::size_t(r.w) * r.h);
+  const float* s = c.vol.slice(k);
+  for (int y = 0; y < r.h; ++y)
+    std::copy_n(s + std::size_t(r.y0 + y) * c.W + r.x0, r.w, out.data() + std::size_t(y) * r.w);
+  return out;
+}
+
+std::vector<Point2> to_px(const SliceCtx& c, const std::vector<Point2>& mm, double ox = 0, double oy = 0) {
+  std::vector<Point2> px;
+  px.reserve(mm.size());
+  for (const auto& p : mm) px.push_back({p.x / c.sx - ox, p.y / c.sy - oy});
+  return px;
+}
+
+/// Median of the HU values of slice k inside a polygon (slice mm); NaN when it covers no pixel.
+double median_inside(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& mm) {
+  std::vector<float> v;
+  const float* s = c.vol.slice(k);
+  seg::rasterise(to_px(c, mm), c.W, c.H, [&](int x, int y) { v.push_back(s[std::size_t(y) * c.W + x]); });
+  if (v.empty()) return std::nan("");
+  auto mid = v.begin() + std::ptrdiff_t(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+Point2 centroid(const std::vector<Point2>& p) {
+  // Area centroid of the polygon (falls back to the vertex mean for degenerate ones).
+  double a = 0, cx = 0, cy = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    const Point2& q = p[i];
+    const Point2& r = p[(i + 1) % p.size()];
+    const double c = q.x * r.y - r.x * q.y;
+    a += c;
+    cx += (q.x + r.x) * c;
+    cy += (q.y + r.y) * c;
+  }
+  if (std::abs(a) < 1e-9) {
+    Point2 m;
+    for (const auto& q : p) m.x += q.x / p.size(), m.y += q.y / p.size();
+    return m;
+  }
+  return {cx / (3 * a), cy / (3 * a)};
+}
+
+std::vector<Point2> scaled(const std::vector<Point2>& p, double f) {
+  const Point2 c = centroid(p);
+  std::vector<Point2> out;
+  for (const auto& q : p) out.push_back({c.x + f * (q.x - c.x), c.y + f * (q.y - c.y)});
+  return out;
+}
+
+struct Fit {
+  std::vector<Point2> pts;  // slice mm
+  double area_mm2 = 0;
+  bool touches_roi = false;
+};
+
+/// Runs the GVF snake of `p` on slice k from `init` (slice mm), with the region pressure
+/// positive for smoothed HU in [lo, hi].
+Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init, const OrganPreset& p, double lo,
+              double hi, double margin_mm, double open_mm) {
+  Fit fit;
+  for (int attempt = 0; attempt < 3; ++attempt) {
+    const Roi r = roi_around(c, init, margin_mm);
+    const std::vector<float> hu = crop(c, k, r);
+    const Image2f f = seg::edge_map(hu.data(), r.w, r.h, c.sx, c.sy,
+                                    {p.edge_window_lo_hu, p.edge_window_hi_hu, p.edge_sigma_mm});
+    seg::GvfMultigridOptions go;
+    go.mu = p.gvf_mu;
+    go.tolerance = 1e-3;  // the snake needs the field's direction, not six digits
+    seg::GvfField g = seg::gvf_multigrid(f, go);
+    // Saturate the field: unit magnitude wherever it is at least 15 % of its maximum, so a weak
+    // edge (bile against liver) pulls as firmly as a strong one (fat against muscle).
+    float mmax = 0;
+    for (std::size_t i = 0; i < g.u.px.size(); ++i) mmax = std::max(mmax, std::hypot(g.u.px[i], g.v.px[i]));
+    const float floor_m = std::max(0.15f * mmax, 1e-12f);
+    for (std::size_t i = 0; i < g.u.px.size(); ++i) {
+      const float s = 1.0f / std::max(std::hypot(g.u.px[i], g.v.px[i]), floor_m);
+      g.u.px[i] *= s;
+      g.v.px[i] *= s;
+    }
+    // Region smoothing: at least region_sigma_px pixels, since the per-voxel noise the region
+    // test must average out is set by the voxel, while smoothing in mm moves the boundary.
+    const double region_sigma = std::max(p.region_sigma_mm, p.region_sigma_px * std::min(c.sx, c.sy));
+    Image2f pr = seg::smooth_slice(hu.data(), r.w, r.h, c.sx, c.sy, region_sigma);
+    const float ramp = float(p.pressure_ramp_hu);
+    for (float& v : pr.px) v = std::clamp(std::min(v - float(lo), float(hi) - v) / ramp, -1.0f, 1.0f);
+    if (open_mm > 0) {
+      // Grey-level opening removes ridges of "organ-like" pressure thinner than the kernel: the
+      // partial-volume band where two other tissues meet (liver 60 HU against fat −100 HU
+      // passes through bile's 0–20 HU) would otherwise lead the snake out along the interface.
+      const int rx = std::max(1, int(std::lround(open_mm / c.sx)));
+      const int ry = std::max(1, int(std::lround(open_mm / c.sy)));
+      cv::Mat m(r.h, r.w, CV_32F, pr.px.data());
+      cv::morphologyEx(m, m, cv::MORPH_OPEN, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * rx + 1, 2 * ry + 1}),
+                       {-1, -1}, 1, cv::BORDER_REPLICATE);
+    }
+    if (p.edge_stop > 0) {
+      // Balloon with an edge stop (Cohen 1991; Caselles et al. 1997): the pressure fades where the
+      // edge map is strong, so a weak wall between the organ and a neighbour of similar HU
+      // (gallbladder against duodenum) holds the contour and the GVF force seats it there.
+      const float inv = float(1.0 / p.edge_stop);
+      for (std::size_t i = 0; i < pr.px.size(); ++i)
+        if (pr.px[i] > 0) pr.px[i] /= 1.0f + f.px[i] * inv;
+    }
+    seg::SnakeForces forces{&g.u, &g.v, &pr, c.sx, c.sy};
+    seg::SnakeOptions so;
+    so.alpha = p.alpha;
+    so.beta = p.beta;
+    so.kappa = p.kappa;
+    so.balloon = p.balloon;
+    so.point_spacing_mm = p.point_spacing_mm;
+    so.max_iterations = p.max_iterations;
+    const double ox = r.x0 * c.sx, oy = r.y0 * c.sy;
+    std::vector<Point2> local;
+    for (const auto& q : init) local.push_back({q.x - ox, q.y - oy});
+    seg::SnakeResult s = seg::evolve_snake(local, forces, so);
+    fit.pts.clear();
+    for (const auto& q : s.points) fit.pts.push_back({q.x + ox, q.y + oy});
+    fit.area_mm2 = std::abs(seg::polygon_area(fit.pts));
+    // A contour that reached the working window's edge (not the image's) may have been stopped
+    // by the crop: retry with a wider window.
+    fit.touches_roi = false;
+    for (const auto& q : s.points) {
+      const double px = q.x / c.sx, py = q.y / c.sy;
+      if ((px < 1.0 && r.x0 > 0) || (py < 1.0 && r.y0 > 0) || (px > r.w - 2.0 && r.x0 + r.w < c.W) ||
+          (py > r.h - 2.0 && r.y0 + r.h < c.H))
+        fit.touches_roi = true;
+    }
+    if (!fit.touches_roi) break;
+    margin_mm *= 2;
+  }
+  return fit;
+}
+
+seg::Point2 to_slice_mm(const SliceCtx& c, const Eigen::Vector3d& ijk) { return {ijk.x() * c.sx, ijk.y() * c.sy}; }
+
+Contour to_contour(const Volume& v, std::int64_t k, const std::vector<Point2>& pts) {
+  Contour ct;
+  ct.slice_k = k;
+  ct.closed = true;
+  const double sx = v.grid.spacing_mm.x(), sy = v.grid.spacing_mm.y();
+  for (const auto& q : pts) ct.points_lps_mm.push_back(v.grid.index_to_lps_mm({q.x / sx, q.y / sy, double(k)}));
+  return ct;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Gallbladder (and any seeded organ): a snake from a small circle at the seed, then slice to
+// slice in both directions, each slice started from its neighbour's converged contour.
+
+struct SliceContour {
+  std::int64_t k;
+  std::vector<Point2> pts;
+};
+
+OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, const OrganPreset& p, bool parallel,
+                                 Progress& progress) {
+  const ImageGrid& g = vol.grid;
+  SliceCtx c(vol);
+  OrganSegmentation out;
+  out.organ = p.organ;
+  out.label = p.label;
+  Eigen::Vector3d ijk;
+  Eigen::Vector3d seed_lps;
+  if (req.seed_ijk) {
+    ijk = Eigen::Vector3d(double((*req.seed_ijk)[0]), double((*req.seed_ijk)[1]), double((*req.seed_ijk)[2]));
+    seed_lps = g.index_to_lps_mm(ijk);
+  } else if (req.seed_lps_mm) {
+    seed_lps = *req.seed_lps_mm;
+    ijk = g.lps_mm_to_index(seed_lps);
+  } else {
+    throw SegmentationError(ExitCode::bad_seed, p.organ + ": a seed is required",
+                            "give --seed X,Y,Z (LPS mm) or --seed-ijk I,J,K inside the " + p.organ);
+  }
+  out.seed_lps_mm = seed_lps;
+  const std::int64_t k0 = std::llround(ijk.z());
+  if (!g.contains(std::llround(ijk.x()), std::llround(ijk.y()), k0))
+    throw SegmentationError(ExitCode::bad_seed,
+                            p.organ + " seed " + fmt_mm(seed_lps) + " lies outside the image",
+                            "give a seed inside the image (see `organsmith info` for its extent)");
+  const Point2 s = to_slice_mm(c, ijk);
+  // What the seed's neighbourhood looks like decides the organ's window.
+  const double seed_med = median_inside(c, k0, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24));
+  if (!(seed_med >= p.seed_hu_lo && seed_med <= p.seed_hu_hi)) {
+    char b[256];
+    std::snprintf(b, sizeof b, "%s seed %s lies in tissue of median %.0f HU, outside the %s range [%.0f, %.0f] HU",
+                  p.organ.c_str(), fmt_mm(seed_lps).c_str(), seed_med, p.organ.c_str(), p.seed_hu_lo, p.seed_hu_hi);
+    throw SegmentationError(ExitCode::bad_seed, b,
+                            "place the seed inside the " + p.organ + " (not in air, fat, bone or a neighbouring organ)");
+  }
+  double mu = seed_med;
+  auto window = [&](double m) { return std::pair{m - p.region_below_hu, m + p.region_above_hu}; };
+  auto [lo, hi] = window(mu);
+  const double seed_margin = std::max(p.roi_margin_mm, std::sqrt(p.max_area_mm2 / M_PI) + 10.0);
+  // The opening radius scales with the organ's cross-section (a fraction of its equivalent
+  // radius), so that necks through which the snake could leak into a neighbour of similar HU
+  // (duodenum, bowel) are cut at any voxel size while the organ itself survives.
+  auto open_for = [&](double area_mm2) {
+    return std::max(p.region_open_mm, p.region_open_fraction * std::sqrt(area_mm2 / M_PI));
+  };
+  Fit f0 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, p.region_open_mm);
+  // The organ's mean is better estimated over its whole cross-section than around the seed;
+  // refit once with the window centred on it.
+  if (f0.area_mm2 >= p.min_area_mm2) {
+    const double m2 = median_inside(c, k0, f0.pts);
+    if (std::isfinite(m2) && m2 >= p.seed_hu_lo && m2 <= p.seed_hu_hi && std::abs(m2 - mu) > 2.0) {
+      mu = m2;
+      std::tie(lo, hi) = window(mu);
+      f0 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, p.region_open_mm);
+    }
+  }
+  for (int pass = 0; pass < 2 && f0.area_mm2 >= p.min_area_mm2; ++pass) {
+    Fit f1 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, open_for(f0.area_mm2));
+    if (f1.area_mm2 < p.min_area_mm2) break;  // the opening removed the organ itself: keep the last fit
+    const bool same = std::abs(f1.area_mm2 - f0.area_mm2) < 0.02 * f0.area_mm2;
+    f0 = std::move(f1);
+    if (same) break;
+  }
+  if (f0.area_mm2 < p.min_area_mm2 || f0.area_mm2 > p.max_area_mm2) {
+    char b[256];
+    std::snprintf(b, sizeof b, "%s not found at seed %s: the contour %s (%.0f mm², expected %.0f–%.0f mm²)",
+                  p.organ.c_str(), fmt_mm(seed_lps).c_str(), f0.area_mm2 < p.min_area_mm2 ? "collapsed" : "leaked",
+                  f0.area_mm2, p.min_area_mm2, p.max_area_mm2);
+    throw SegmentationError(ExitCode::organ_not_found, b, "check that the seed lies inside the " + p.organ);
+  }
+  std::vector<SliceContour> up, down;
+  std::string note_up, note_down;
+  std::atomic<int> done{0};
+  const std::int64_t K = g.size_vox[2];
+  auto propagate = [&](int dir, std::vector<SliceContour>& acc, std::string& note) {
+    std::vector<Point2> prev = f0.pts;
+    double prev_area = f0.area_mm2;
+    for (std::int64_t k = k0 + dir; k >= 0 && k < K; k += dir) {
+      progress.check_cancelled();
+      progress.report(std::min(0.99, double(++done) / 40.0), "segmenting " + p.organ);
+      // Start inside the neighbour's contour, so the pressure grows it out to this slice's edge
+      // rather than having to pull a too-large start back.
+      const std::vector<Point2> init = scaled(prev, 0.7);
+      const double m_init = median_inside(c, k, init);
+      if (!(m_init >= lo && m_init <= hi)) {
+        note = "stopped at slice " + std::to_string(k) + ": the region left the organ's HU window";
+        return;
+      }
+      Fit f = fit_slice(c, k, init, p, lo, hi, p.roi_margin_mm, open_for(prev_area));
+      if (f.area_mm2 < p.min_area_mm2) {
+        note = "stopped at slice " + std::to_string(k) + ": area collapsed";
+        return;
+      }
+      if (f.area_mm2 > p.max_area_mm2 || f.area_mm2 > p.max_area_ratio * prev_area) {
+        note = "stopped at slice " + std::to_string(k) + ": area jumped (leak into a neighbour)";
+        return;
+      }
+      const double m = median_inside(c, k, f.pts);
+      if (!(std::abs(m - mu) <= p.max_mean_drift_hu)) {
+        note = "stopped at slice " + std::to_string(k) + ": intensity drifted from the organ's";
+        return;
+      }
+      acc.push_back({k, f.pts});
+      prev = f.pts;
+      prev_area = f.area_mm2;
+    }
+    note = std::string("reached the ") + (dir > 0 ? "last" : "first") + " slice";
+  };
+  if (parallel)
+    tbb::parallel_invoke([&] { propagate(+1, up, note_up); }, [&] { propagate(-1, down, note_down); });
+  else {
+    propagate(+1, up, note_up);
+    propagate(-1, down, note_down);
+  }
+  std::vector<SliceContour> all(down.rbegin(), down.rend());
+  all.push_back({k0, f0.pts});
+  all.insert(all.end(), up.begin(), up.end());
+  out.contours.organ = p.organ;
+  for (const auto& sc : all) out.contours.contours.push_back(to_contour(vol, sc.k, sc.pts));
+  out.first_slice = all.front().k;
+  out.last_slice = all.back().k;
+  out.notes = {"towards k = 0: " + note_down, "towards k = " + std::to_string(K - 1) + ": " + note_up};
+  return out;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Trachea: no seed. The air lumen that is round, near the body midline and runs along the body
+// for at least min_length_mm is the trachea; it is followed caudally until it divides (carina).
+
+struct Component {
+  double area_mm2 = 0;
+  Point2 centroid_mm;   // slice mm
+  Point2 inner_mm;      // the pixel deepest inside (start of the snake)
+  double inner_radius_mm = 0;
+  double fill = 0, aspect = 0;
+  bool touches_border = false;
+  cv::Rect box;
+  int id = 0;
+};
+
+struct AirSlice {
+  cv::Mat labels;  // CV_32S, 0 = not air
+  std::vector<Component> comps;
+};
+
+AirSlice air_components(const SliceCtx& c, std::int64_t k, double air_hu) {
+  AirSlice a;
+  cv::Mat m(c.H, c.W, CV_8U);
+  const float* s = c.vol.slice(k);
+  for (int y = 0; y < c.H; ++y) {
+    auto* r = m.ptr<std::uint8_t>(y);
+    for (int x = 0; x < c.W; ++x) r[x] = s[std::size_t(y) * c.W + x] < air_hu ? 1 : 0;
+  }
+  cv::Mat stats, cents;
+  const int n = cv::connectedComponentsWithStats(m, a.labels, stats, cents, 4, CV_32S);
+  const double px_area = c.sx * c.sy;
+  for (int i = 1; i < n; ++i) {
+    Component q;
+    q.id = i;
+    q.box = {stats.at<int>(i, cv::CC_STAT_LEFT), stats.at<int>(i, cv::CC_STAT_TOP), stats.at<int>(i, cv::CC_STAT_WIDTH),
+             stats.at<int>(i, cv::CC_STAT_HEIGHT)};
+    const int npx = stats.at<int>(i, cv::CC_STAT_AREA);
+    q.area_mm2 = npx * px_area;
+    q.centroid_mm = {cents.at<double>(i, 0) * c.sx, cents.at<double>(i, 1) * c.sy};
+    q.touches_border = q.box.x == 0 || q.box.y == 0 || q.box.x + q.box.width == c.W || q.box.y + q.box.height == c.H;
+    q.fill = double(npx) / (double(q.box.width) * q.box.height);
+    const double bw = q.box.width * c.sx, bh = q.box.height * c.sy;
+    q.aspect = std::max(bw, bh) / std::max(std::min(bw, bh), 1e-9);
+    a.comps.push_back(q);
+  }
+  return a;
+}
+
+void find_inner_point(const SliceCtx& c, const AirSlice& a, Component& q) {
+  cv::Mat mask = cv::Mat::zeros(q.box.height + 2, q.box.width + 2, CV_8U);
+  for (int y = 0; y < q.box.height; ++y)
+    for (int x = 0; x < q.box.width; ++x)
+      if (a.labels.at<int>(q.box.y + y, q.box.x + x) == q.id) mask.at<std::uint8_t>(y + 1, x + 1) = 255;
+  cv::Mat d;
+  cv::distanceTransform(mask, d, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  double mx;
+  cv::Point loc;
+  cv::minMaxLoc(d, nullptr, &mx, nullptr, &loc);
+  q.inner_mm = {(q.box.x + loc.x - 1) * c.sx, (q.box.y + loc.y - 1) * c.sy};
+  q.inner_radius_mm = mx * std::min(c.sx, c.sy);
+}
+
+/// Left–right position (mm, along the patient's L axis) of the body's centre in slice k.
+double body_centre_l(const SliceCtx& c, std::int64_t k) {
+  const float* s = c.vol.slice(k);
+  double sum = 0;
+  std::int64_t n = 0;
+  for (int y = 0; y < c.H; y += 2)
+    for (int x = 0; x < c.W; x += 2)
+      if (s[std::size_t(y) * c.W + x] > -300.0f) {
+        sum += c.vol.grid.index_to_lps_mm({double(x), double(y), double(k)}).x();
+        ++n;
+      }
+  return n ? sum / double(n) : c.vol.grid.index_to_lps_mm({c.W / 2.0, c.H / 2.0, double(k)}).x();
+}
+
+OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool parallel, Progress& progress) {
+  const ImageGrid& g = vol.grid;
+  SliceCtx c(vol);
+  OrganSegmentation out;
+  out.organ = p.organ;
+  out.label = p.label;
+  const std::int64_t K = g.size_vox[2];
+  // Slices from cranial to caudal.
+  std::vector<std::int64_t> order(static_cast<std::size_t>(K));
+  std::iota(order.begin(), order.end(), 0);
+  const bool k_up_is_cranial = g.index_to_lps_mm({0, 0, 1}).z() > g.index_to_lps_mm({0, 0, 0}).z();
+  if (k_up_is_cranial) std::reverse(order.begin(), order.end());
+  // Candidates per slice.
+  std::vector<std::vector<Component>> cands(static_cast<std::size_t>(K));
+  auto find = [&](std::int64_t k) {
+    AirSlice a = air_components(c, k, p.air_hu);
+    const double mid = body_centre_l(c, k);
+    for (Component& q : a.comps) {
+      if (q.touches_border || q.area_mm2 < p.min_area_mm2 || q.area_mm2 > p.max_area_mm2 || q.fill < p.min_fill ||
+          q.aspect > p.max_aspect)
+        continue;
+      const double l = g.index_to_lps_mm({q.centroid_mm.x / c.sx, q.centroid_mm.y / c.sy, double(k)}).x();
+      if (std::abs(l - mid) > p.max_midline_offset_mm) continue;
+      cands[std::size_t(k)].push_back(q);
+    }
+  };
+  if (parallel)
+    tbb::parallel_for(std::int64_t(0), K, [&](std::int64_t k) { find(k); });
+  else
+    for (std::int64_t k = 0; k < K; ++k) find(k);
+  progress.report(0.3, "finding the trachea");
+  progress.check_cancelled();
+  // The most cranial candidate that continues (centroid within a lumen radius or 10 mm) for at
+  // least min_length_mm of slices.
+  const double dz = g.spacing_mm.z();
+  const int need = std::max(2, int(std::ceil(p.min_length_mm / dz)) + 1);
+  std::size_t start = order.size();
+  Component start_comp;
+  for (std::size_t oi = 0; oi < order.size() && start == order.size(); ++oi) {
+    for (const Component& q : cands[std::size_t(order[oi])]) {
+      Point2 at = q.centroid_mm;
+      int run = 1;
+      for (std::size_t oj = oi + 1; oj < order.size() && run < need; ++oj) {
+        bool found = false;
+        for (const Component& r : cands[std::size_t(order[oj])])
+          if (std::hypot(r.centroid_mm.x - at.x, r.centroid_mm.y - at.y) < 10.0) {
+            at = r.centroid_mm;
+            found = true;
+            break;
+          }
+        if (!found) break;
+        ++run;
+      }
+      if (run >= need) {
+        start = oi;
+        start_comp = q;
+        break;
+      }
+    }
+  }
+  if (start == order.size())
+    throw SegmentationError(ExitCode::organ_not_found,
+                            "trachea not found: no round air lumen near the body midline continues for " +
+                                std::to_string(int(p.min_length_mm)) + " mm",
+                            "the scan must include the chest above the carina; check the series with `organsmith info`");
+  // Follow the lumen caudally.
+  std::vector<SliceContour> acc;
+  std::vector<Point2> prev_pts;
+  double prev_area = 0;
+  std::string note = "reached the last slice";
+  for (std::size_t oi = start; oi < order.size(); ++oi) {
+    progress.check_cancelled();
+    progress.report(0.3 + 0.7 * double(oi - start) / double(order.size() - start), "segmenting trachea");
+    const std::int64_t k = order[oi];
+    AirSlice a = air_components(c, k, p.air_hu);
+    Component comp;
+    if (oi == start) {
+      comp = start_comp;
+    } else {
+      // Air components overlapping the previous lumen.
+      std::map<int, int> overlap;
+      const std::vector<Point2> px = to_px(c, prev_pts);
+      seg::rasterise(px, c.W, c.H, [&](int x, int y) {
+        const int l = a.labels.at<int>(y, x);
+        if (l) ++overlap[l];
+      });
+      std::vector<Component> hits;
+      for (const auto& [l, n] : overlap) {
+        const Component& q = a.comps[std::size_t(l - 1)];
+        if (q.area_mm2 >= 0.25 * p.min_area_mm2 && !q.touches_border) hits.push_back(q);
+      }
+      if (hits.empty()) {
+        note = "stopped at slice " + std::to_string(k) + ": the lumen ends";
+        break;
+      }
+      if (hits.size() >= 2) {
+        note = "stopped at slice " + std::to_string(k) + ": the lumen divides (carina)";
+        break;
+      }
+      comp = hits.front();
+      if (comp.area_mm2 > p.max_area_ratio * prev_area) {
+        note = "stopped at slice " + std::to_string(k) + ": the lumen widens into the bronchi or lungs";
+        break;
+      }
+    }
+    find_inner_point(c, a, comp);
+    const double r0 = std::clamp(0.5 * comp.inner_radius_mm, 1.0, p.start_radius_mm);
+    Fit f = fit_slice(c, k, seg::circle(comp.inner_mm, r0, 16), p, p.air_hu - p.region_below_hu, p.air_hu,
+                      std::max(p.roi_margin_mm, std::sqrt(comp.area_mm2)), p.region_open_mm);
+    if (f.area_mm2 < p.min_area_mm2 * 0.25) {
+      note = "stopped at slice " + std::to_string(k) + ": the lumen collapses";
+      break;
+    }
+    acc.push_back({k, f.pts});
+    prev_pts = f.pts;
+    prev_area = std::max(f.area_mm2, comp.area_mm2);
+  }
+  std::sort(acc.begin(), acc.end(), [](const auto& a, const auto& b) { return a.k < b.k; });
+  out.contours.organ = p.organ;
+  for (const auto& sc : acc) out.contours.contours.push_back(to_contour(vol, sc.k, sc.pts));
+  out.first_slice = acc.front().k;
+  out.last_slice = acc.back().k;
+  out.seed_lps_mm = g.index_to_lps_mm({start_comp.centroid_mm.x / c.sx, start_comp.centroid_mm.y / c.sy, double(order[start])});
+  out.notes = {"found at slice " + std::to_string(order[start]) + " (most cranial round midline air lumen)",
+               "caudal end: " + note};
+  return out;
+}
+
+}  // namespace
+
+SegmentationResult segment_organs(const Volume& volume, const std::vector<OrganRequest>& organs,
+                                  const SegmentOptions& options, Progress& progress) {
+  volume.grid.validate();
+  auto presets = default_organ_presets();
+  if (!options.preset_overrides_toml.empty())
+    presets = parse_organ_presets(options.preset_overrides_toml, std::move(presets));
+  std::vector<const OrganPreset*> ps;
+  for (const auto& r : organs) {
+    auto it = presets.find(r.organ);
+    if (it == presets.end())
+      throw SegmentationError(ExitCode::organ_not_found, "no preset for organ '" + r.organ + "'",
+                              "organs with presets: gallbladder, trachea (data/organs.toml)");
+    ps.push_back(&it->second);
+  }
+  if (volume.grid.size_vox[0] < 8 || volume.grid.size_vox[1] < 8)
+    throw SegmentationError(ExitCode::organ_not_found, "the image is too small to segment (under 8 × 8 pixels per slice)");
+  SegmentationResult res;
+  res.organs.resize(organs.size());
+  auto one = [&](std::size_t i) {
+    const OrganPreset& p = *ps[i];
+    res.organs[i] = (p.needs_seed || organs[i].seed_lps_mm || organs[i].seed_ijk)
+                        ? segment_seeded(volume, organs[i], p, options.parallel, progress)
+                        : segment_trachea(volume, p, options.parallel, progress);
+  };
+  if (options.parallel && organs.size() > 1)
+    tbb::parallel_for(std::size_t(0), organs.size(), one);
+  else
+    for (std::size_t i = 0; i < organs.size(); ++i) one(i);
+  // Label assembly: each contour filled on its slice.
+  res.labels.grid = volume.grid;
+  res.labels.labels.assign(std::size_t(volume.grid.voxel_count()), 0);
+  SliceCtx c(volume);
+  for (auto& o : res.organs) {
+    std::int64_t n = 0;
+    for (const Contour& ct : o.contours.contours) {
+      std::vector<Point2> px;
+      for (const auto& q : ct.points_lps_mm) {
+        const Eigen::Vector3d ijk = volume.grid.lps_mm_to_index(q);
+        px.push_back({ijk.x(), ijk.y()});
+      }
+      std::uint8_t* s = res.labels.labels.data() + ct.slice_k * volume.grid.slice_voxel_count();
+      seg::rasterise(px, c.W, c.H, [&](int x, int y) {
+        s[std::size_t(y) * c.W + x] = o.label;
+        ++n;
+      });
+    }
+    if (n == 0)
+      throw SegmentationError(ExitCode::organ_not_found, o.organ + ": the contours enclose no voxel",
+                              "check the seed and the organ presets");
+    o.volume_ml = double(n) * volume.grid.spacing_mm.prod() / 1000.0;
+  }
+  progress.report(1.0, "segmentation done");
+  return res;
+}
+
+std::string contours_json(const OrganSegmentation& organ) {
+  nlohmann::json j;
+  j["organ"] = organ.organ;
+  j["label"] = organ.label;
+  j["frame"] = "LPS";
+  j["unit"] = "mm";
+  j["contours"] = nlohmann::json::array();
+  for (const auto& c : organ.contours.contours) {
+    nlohmann::json pts = nlohmann::json::array();
+    for (const auto& p : c.points_lps_mm) {
+      // 4 decimals (0.1 µm): enough, and keeps the text byte-identical across runs.
+      auto r = [](double v) { return std::round(v * 1e4) / 1e4; };
+      pts.push_back({r(p.x()), r(p.y()), r(p.z())});
+    }
+    j["contours"].push_back({{"slice_k", c.slice_k}, {"closed", c.closed}, {"points_lps_mm", pts}});
+  }
+  return j.dump(1) + "\n";
+}
+
+}  // namespace organsmith
