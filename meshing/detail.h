@@ -1,0 +1,98 @@
+#pragma once
+// Internal to meshing/: the pieces the CGAL translation units expose to the orchestration in
+// mesh.cpp, in core types only (no CGAL here, so that only the .cpp files that need CGAL pay
+// for its headers). Coordinates are in the grid frame: q = diag(spacing) · (i, j, k) in mm,
+// axis-aligned with the voxel grid; mesh.cpp maps them to LPS at the end (a rigid motion, so
+// lengths, angles and orientation are unchanged).
+
+#include "core/geometry.h"
+
+#include <Eigen/Core>
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+namespace organsmith::meshing_detail {
+
+/// A scalar field on a regular axis-aligned grid in the grid frame (mm), sampled trilinearly.
+struct Field3 {
+  std::array<std::int64_t, 3> n{0, 0, 0};
+  Eigen::Vector3d h{1, 1, 1};       ///< sample spacing (mm)
+  Eigen::Vector3d origin{0, 0, 0};  ///< position of sample (0, 0, 0) (mm, grid frame)
+  std::vector<float> v;             ///< n0 * n1 * n2 values, first axis fastest
+  float outside = 0.0f;             ///< value returned outside the grid
+
+  std::int64_t index(std::int64_t i, std::int64_t j, std::int64_t k) const { return i + n[0] * (j + n[1] * k); }
+  double sample(const Eigen::Vector3d& q) const;
+  Eigen::Vector3d upper() const { return origin + h.cwiseProduct(Eigen::Vector3d(double(n[0] - 1), double(n[1] - 1), double(n[2] - 1))); }
+};
+
+/// Axis-aligned box in the grid frame (mm).
+struct Box {
+  Eigen::Vector3d lo, hi;
+};
+
+/// Labels a point (grid frame mm): 0 outside, > 0 the subdomain (region) it lies in.
+using LabelFunction = std::function<int(const Eigen::Vector3d&)>;
+
+/// Mesh_3 refinement criteria (mm, degrees).
+struct Mesh3Criteria {
+  double facet_size_mm = 1.5;
+  double facet_distance_mm = 0.1;
+  double facet_angle_deg = 30.0;
+  double cell_size_mm = 0.0;          ///< 0 = surface only (no cell refinement)
+  double cell_radius_edge = 0.0;      ///< 0 = none
+  double edge_size_mm = 0.0;          ///< protection of sharp features (polyhedral domains)
+  double odt_seconds = 0.0;           ///< > 0: ODT smoothing for at most this long (tets)
+  double perturb_bound_deg = 0.0;     ///< > 0: sliver perturbation towards this dihedral angle (tets)
+  double exude_bound_deg = 0.0;       ///< > 0: sliver exudation towards this dihedral angle (tets)
+  double optimiser_seconds = 30.0;    ///< time limit of perturbation and exudation each (0 = none)
+};
+
+/// Surface between label 0 and the rest of `f` inside `box`, sampled by CGAL Mesh_3
+/// (surface criteria only; manifold). Returns a triangle soup with shared vertices;
+/// orientation is not fixed here. Deterministic (fixed random seed).
+SurfaceMesh mesh3_surface(const LabelFunction& f, const Box& box, const Mesh3Criteria& c);
+
+/// Tetrahedra of the nonzero subdomains of `f` (region id = label), positively oriented.
+TetMesh mesh3_tets_implicit(const LabelFunction& f, const Box& box, const Mesh3Criteria& c);
+
+/// Tetrahedra inside a closed, outward-oriented surface (region id `region`); edges whose
+/// dihedral angle is sharper than `feature_angle_deg` are protected (flat caps stay flat).
+TetMesh mesh3_tets_polyhedral(const SurfaceMesh& closed, std::int32_t region, double feature_angle_deg,
+                              const Mesh3Criteria& c);
+
+/// Options of `repair_and_remesh`.
+struct RemeshParams {
+  double target_edge_mm = 1.5;
+  int iterations = 6;
+  double min_angle_deg = 25.0;     ///< angle improvement works on triangles below this
+  double feature_angle_deg = 0.0;  ///< > 0: keep edges sharper than this (cap rims) as constraints
+};
+
+/// The surface pipeline after sampling: keeps the largest component, fills holes, remeshes
+/// isotropically to the target edge length (vertices stay on the input surface), improves
+/// the smallest angles (flips, collapses, angle smoothing), and orients it outward.
+SurfaceMesh repair_and_remesh(const SurfaceMesh& in, const RemeshParams& p, std::vector<std::string>& notes);
+
+/// Axis-aligned cut: keeps the part with lo ≤ q[axis] ≤ hi and closes it with flat caps.
+SurfaceMesh clip_slab(const SurfaceMesh& in, int axis, double lo, double hi);
+
+}  // namespace organsmith::meshing_detail
+
+namespace organsmith::meshing_detail {
+
+/// Separable Gaussian smoothing of `f` in place; σ per axis in samples (0 = none on that axis).
+void gaussian_smooth(Field3& f, const Eigen::Vector3d& sigma_samples);
+
+/// Signed Euclidean distance (mm) to the boundary of {q : f(q) ≥ iso}, negative inside, on
+/// f's own grid (exact distance transform between sample centres, half a sample subtracted
+/// so that the zero level sits between inside and outside samples).
+Field3 signed_distance(const Field3& f, float iso);
+
+/// f resampled trilinearly on a grid of spacing `h_mm` covering [lo, hi].
+Field3 resample(const Field3& f, const Box& box, double h_mm);
+
+}  // namespace organsmith::meshing_detail

@@ -1,0 +1,63 @@
+#pragma once
+// Writers for organ meshes in the formats simulators and viewers load unedited. Every file is
+// written atomically (a temporary file in the same directory, then a rename), so a failed
+// export never leaves a partial file. Coordinates are LPS mm unless `ras` is set (then x and y
+// are negated: a rotation, so orientation and volumes are unchanged).
+
+#include "core/geometry.h"
+#include "core/material.h"
+#include "meshing/mesh.h"
+
+#include <filesystem>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace organsmith {
+
+/// Every format `export_meshes` knows, in the order files are written.
+/// Surfaces: stl (binary), obj, ply (binary little-endian), vtp. Volumes: vtu, msh (Gmsh 4.1),
+/// msh22 (Gmsh 2.2), inp (Abaqus), feb (FEBio 4.0).
+std::vector<std::string> all_mesh_formats();
+
+struct ExportOptions {
+  std::vector<std::string> formats = all_mesh_formats();
+  bool ras = false;  ///< write RAS instead of LPS coordinates
+  /// Material per tet region name ("gallbladder_wall", "gallbladder_body", "trachea_wall") for
+  /// INP and FEB. Stresses are written in MPa (the meshes are in mm). A region without an
+  /// entry gets a documented placeholder and a warning.
+  std::map<std::string, Material> materials;
+};
+
+/// Writes every organ into `dir/<organ>/`: one file per surface and format
+/// (`<surface>.stl`, …), one per volume format (`<organ>.vtu`, `<organ>.msh`,
+/// `<organ>.v22.msh`, `<organ>.inp`, `<organ>.feb`) and `quality.json` with every quality
+/// figure. Returns the files written, relative to `dir`, in a fixed order; `warnings`
+/// receives what the user should know (placeholder materials). Throws OutputError.
+std::vector<std::filesystem::path> export_meshes(const OrganMeshes& meshes, const std::filesystem::path& dir,
+                                                 const ExportOptions& options, std::vector<std::string>* warnings = nullptr);
+
+/// Single-file writers (atomic). `region_names` maps tet region ids to names.
+void write_stl(const SurfaceMesh& m, const std::filesystem::path& path, bool ras = false);
+void write_obj(const SurfaceMesh& m, const std::filesystem::path& path, bool ras = false);
+void write_ply(const SurfaceMesh& m, const std::filesystem::path& path, bool ras = false);
+void write_vtp(const SurfaceMesh& m, const std::filesystem::path& path, bool ras = false);
+void write_vtu(const TetMesh& m, const std::filesystem::path& path, bool ras = false);
+void write_msh41(const TetMesh& m, const std::map<std::int32_t, std::string>& region_names,
+                 const std::filesystem::path& path, bool ras = false);
+void write_msh22(const TetMesh& m, const std::map<std::int32_t, std::string>& region_names,
+                 const std::filesystem::path& path, bool ras = false);
+void write_inp(const TetMesh& m, const std::map<std::int32_t, std::string>& region_names,
+               const std::map<std::string, Material>& materials, const std::filesystem::path& path,
+               bool ras = false, std::vector<std::string>* warnings = nullptr);
+void write_feb(const TetMesh& m, const std::map<std::int32_t, std::string>& region_names,
+               const std::map<std::string, Material>& materials, const std::filesystem::path& path,
+               bool ras = false, std::vector<std::string>* warnings = nullptr);
+
+/// Reads a binary STL back (for round-trip checks): triangles with merged vertices.
+SurfaceMesh read_stl(const std::filesystem::path& path);
+
+/// quality.json content for one organ.
+std::string quality_json(const OrganMesh& organ);
+
+}  // namespace organsmith

@@ -1,0 +1,425 @@
+// Orchestration of the meshing stage: per organ, prepare the smoothed field, sample and remesh
+// the surfaces, build the wall bodies and tetrahedra, and measure everything. No CGAL here.
+
+#include "meshing/mesh.h"
+
+#include "core/errors.h"
+#include "meshing/detail.h"
+#include "meshing/tet_improve.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <exception>
+#include <limits>
+#include <sstream>
+
+namespace organsmith {
+
+using namespace meshing_detail;
+
+std::vector<MeshOrganSpec> default_organs() {
+  return {{"gallbladder", std::uint8_t(Label::gallbladder), OrganModel::wall_body, 2.0},
+          {"trachea", std::uint8_t(Label::trachea), OrganModel::tube, 2.5}};
+}
+
+MeshQualityError::MeshQualityError(std::string message, std::string hint)
+    : Error(ExitCode::mesh_quality, std::move(message), {}, std::move(hint)) {}
+
+namespace {
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+std::string fmt(double v, int digits = 3) {
+  std::ostringstream s;
+  s.precision(digits);
+  s << v;
+  return s.str();
+}
+
+/// An organ's mask cropped (with a margin) out of the label map, in the grid frame.
+struct Prepared {
+  std::array<std::int64_t, 3> b0{}, b1{};  ///< bounding box of the label (voxel indices)
+  std::array<std::int64_t, 3> lo{}, n{};   ///< crop origin (may lie outside the image) and size
+  std::array<bool, 6> cut{};               ///< surface cut flat on side (axis, low/high)
+  Field3 field;                            ///< smoothed mask (1 inside) on the crop
+  Box clip{Eigen::Vector3d::Constant(-kInf), Eigen::Vector3d::Constant(kInf)};
+  Box extended;                            ///< clip box widened on cut sides; the implicit domain ends here
+  Box domain;                              ///< Mesh_3 bounding box
+  LabelMap kept;                           ///< the voxels meshed (1), on a crop of the input grid
+  double label_volume_mm3 = 0, dropped_volume_mm3 = 0;
+  float iso = 0.5f;
+  Field3 fine;                             ///< `field` resampled finely (volume calibration, distances)
+};
+
+/// 6-connected components of `on` cells in an n-grid; returns per-cell component id (−1 off).
+std::vector<std::int32_t> components(const std::vector<std::uint8_t>& on, const std::array<std::int64_t, 3>& n,
+                                     std::vector<std::int64_t>& sizes, bool value) {
+  std::vector<std::int32_t> id(on.size(), -1);
+  std::vector<std::int64_t> stack;
+  for (std::int64_t s = 0; s < std::int64_t(on.size()); ++s) {
+    if (bool(on[s]) != value || id[s] >= 0) continue;
+    const std::int32_t c = std::int32_t(sizes.size());
+    sizes.push_back(0);
+    stack.push_back(s);
+    id[s] = c;
+    while (!stack.empty()) {
+      const std::int64_t x = stack.back();
+      stack.pop_back();
+      ++sizes[c];
+      const std::int64_t i = x % n[0], j = (x / n[0]) % n[1], k = x / (n[0] * n[1]);
+      const std::int64_t nb[6][3] = {{i - 1, j, k}, {i + 1, j, k}, {i, j - 1, k}, {i, j + 1, k}, {i, j, k - 1}, {i, j, k + 1}};
+      for (const auto& q : nb) {
+        if (q[0] < 0 || q[1] < 0 || q[2] < 0 || q[0] >= n[0] || q[1] >= n[1] || q[2] >= n[2]) continue;
+        const std::int64_t y = q[0] + n[0] * (q[1] + n[1] * q[2]);
+        if (bool(on[y]) == value && id[y] < 0) {
+          id[y] = c;
+          stack.push_back(y);
+        }
+      }
+    }
+  }
+  return id;
+}
+
+Prepared prepare(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOptions& o, std::vector<std::string>& warnings) {
+  Prepared p;
+  const auto& g = lm.grid;
+  const auto N = g.size_vox;
+  const Eigen::Vector3d s = g.spacing_mm;
+  for (int a = 0; a < 3; ++a) p.b0[a] = N[a], p.b1[a] = -1;
+  std::int64_t count = 0;
+  for (std::int64_t k = 0; k < N[2]; ++k)
+    for (std::int64_t j = 0; j < N[1]; ++j)
+      for (std::int64_t i = 0; i < N[0]; ++i)
+        if (lm.labels[g.offset(i, j, k)] == spec.label) {
+          ++count;
+          p.b0 = {std::min(p.b0[0], i), std::min(p.b0[1], j), std::min(p.b0[2], k)};
+          p.b1 = {std::max(p.b1[0], i), std::max(p.b1[1], j), std::max(p.b1[2], k)};
+        }
+  if (count == 0) return p;  // caller reports absence
+
+  // Sides cut flat: the tube's two ends, and any side where the label reaches the image border.
+  for (int a = 0; a < 3; ++a) {
+    const bool tube_axis = spec.model == OrganModel::tube && a == 2;
+    p.cut[2 * a] = tube_axis || p.b0[a] == 0;
+    p.cut[2 * a + 1] = tube_axis || p.b1[a] == N[a] - 1;
+    static const char* names[3][2] = {{"first column (i = 0)", "last column"}, {"first row (j = 0)", "last row"},
+                                      {"first slice (k = 0)", "last slice"}};
+    if (p.b0[a] == 0) warnings.push_back(spec.name + " touches the image border at the " + names[a][0] + "; capped flat there");
+    if (p.b1[a] == N[a] - 1) warnings.push_back(spec.name + " touches the image border at the " + names[a][1] + "; capped flat there");
+  }
+
+  const double sigma_mm_max = o.max_smoothing_sigma_mm;
+  Eigen::Vector3d sigma_samples;
+  for (int a = 0; a < 3; ++a) sigma_samples[a] = std::min(o.smoothing_sigma_vox * s[a], sigma_mm_max) / s[a];
+  // The implicit domain runs this far past a cut plane before it ends (its rounded end is cut away).
+  const double ext_mm = spec.wall_mm + 4.0 * o.edge_mm + 2.0;
+  const double margin_mm = ext_mm + o.edge_mm + 3.0 * sigma_mm_max + 2.0;
+  for (int a = 0; a < 3; ++a) {
+    const std::int64_t m = std::int64_t(std::ceil(margin_mm / s[a])) + 2;
+    p.lo[a] = p.b0[a] - m;
+    p.n[a] = p.b1[a] - p.b0[a] + 1 + 2 * m;
+  }
+
+  // Crop; beyond a cut side the end layer is repeated so the surface runs straight through the
+  // cut plane and the cut leaves a flat cap.
+  const auto n = p.n;
+  std::vector<std::uint8_t> mask(std::size_t(n[0] * n[1] * n[2]), 0);
+  for (std::int64_t k = 0; k < n[2]; ++k)
+    for (std::int64_t j = 0; j < n[1]; ++j)
+      for (std::int64_t i = 0; i < n[0]; ++i) {
+        std::array<std::int64_t, 3> src{p.lo[0] + i, p.lo[1] + j, p.lo[2] + k};
+        bool inside_image = true;
+        for (int a = 0; a < 3; ++a) {
+          if (p.cut[2 * a] && src[a] < p.b0[a]) src[a] = p.b0[a];
+          if (p.cut[2 * a + 1] && src[a] > p.b1[a]) src[a] = p.b1[a];
+          if (src[a] < 0 || src[a] >= N[a]) inside_image = false;
+        }
+        if (inside_image && lm.labels[g.offset(src[0], src[1], src[2])] == spec.label)
+          mask[std::size_t(i + n[0] * (j + n[1] * k))] = 1;
+      }
+
+  // Largest component; then fill enclosed cavities (they would become inner shells).
+  std::vector<std::int64_t> sizes;
+  const auto comp = components(mask, n, sizes, true);
+  const auto largest = std::int32_t(std::max_element(sizes.begin(), sizes.end()) - sizes.begin());
+  for (std::size_t x = 0; x < mask.size(); ++x) mask[x] = comp[x] == largest;
+  std::vector<std::int64_t> bg_sizes;
+  const auto bg = components(mask, n, bg_sizes, false);
+  std::vector<char> touches(bg_sizes.size(), 0);
+  for (std::int64_t k = 0; k < n[2]; ++k)
+    for (std::int64_t j = 0; j < n[1]; ++j)
+      for (std::int64_t i = 0; i < n[0]; ++i)
+        if (i == 0 || j == 0 || k == 0 || i == n[0] - 1 || j == n[1] - 1 || k == n[2] - 1) {
+          const auto c = bg[std::size_t(i + n[0] * (j + n[1] * k))];
+          if (c >= 0) touches[c] = 1;
+        }
+  std::int64_t filled = 0;
+  for (std::size_t x = 0; x < mask.size(); ++x)
+    if (bg[x] >= 0 && !touches[bg[x]]) mask[x] = 1, ++filled;
+  if (filled > 0) warnings.push_back(spec.name + ": filled " + std::to_string(filled) + " enclosed voxel(s) (cavities)");
+
+  // The voxels meshed, on the input grid (for volume and distance comparisons).
+  const double voxel_mm3 = s.prod();
+  std::array<std::int64_t, 3> klo{}, kn{};
+  for (int a = 0; a < 3; ++a) {
+    // Not beyond a cut side: the layers there are repeated copies, not label voxels.
+    klo[a] = p.cut[2 * a] ? p.b0[a] : std::max<std::int64_t>(0, p.b0[a] - 1);
+    kn[a] = (p.cut[2 * a + 1] ? p.b1[a] : std::min<std::int64_t>(N[a] - 1, p.b1[a] + 1)) - klo[a] + 1;
+  }
+  p.kept.grid = g;
+  p.kept.grid.size_vox = kn;
+  p.kept.grid.origin_lps_mm = g.index_to_lps_mm(Eigen::Vector3d(double(klo[0]), double(klo[1]), double(klo[2])));
+  p.kept.labels.assign(std::size_t(kn[0] * kn[1] * kn[2]), 0);
+  std::int64_t kept = 0;
+  for (std::int64_t k = 0; k < kn[2]; ++k)
+    for (std::int64_t j = 0; j < kn[1]; ++j)
+      for (std::int64_t i = 0; i < kn[0]; ++i) {
+        const std::int64_t ci = klo[0] + i - p.lo[0], cj = klo[1] + j - p.lo[1], ck = klo[2] + k - p.lo[2];
+        if (mask[std::size_t(ci + n[0] * (cj + n[1] * ck))]) {
+          p.kept.labels[std::size_t(i + kn[0] * (j + kn[1] * k))] = 1;
+          ++kept;
+        }
+      }
+  p.label_volume_mm3 = double(kept) * voxel_mm3;
+  p.dropped_volume_mm3 = double(std::max<std::int64_t>(0, count - (kept - filled))) * voxel_mm3;
+  if (p.dropped_volume_mm3 > 0)
+    warnings.push_back(spec.name + ": " + fmt(p.dropped_volume_mm3 / 1000.0) +
+                       " ml outside the largest connected component not meshed");
+  if (kept < 8)
+    throw InputError(ExitCode::mesh_input,
+                     spec.name + ": the label (value " + std::to_string(spec.label) + ") has only " +
+                         std::to_string(kept) + " connected voxel(s), too few to mesh",
+                     {}, "check the segmentation of the " + spec.name + "; meshing needs at least 8 voxels");
+
+  // Smoothed field on the crop (grid frame: q = spacing ⊙ ijk).
+  p.field.n = n;
+  p.field.h = s;
+  p.field.origin = Eigen::Vector3d(double(p.lo[0]), double(p.lo[1]), double(p.lo[2])).cwiseProduct(s);
+  p.field.outside = 0.0f;
+  p.field.v.assign(mask.begin(), mask.end());
+  gaussian_smooth(p.field, sigma_samples);
+
+  for (int a = 0; a < 3; ++a) {
+    if (p.cut[2 * a]) p.clip.lo[a] = (double(p.b0[a]) - 0.5) * s[a];
+    if (p.cut[2 * a + 1]) p.clip.hi[a] = (double(p.b1[a]) + 0.5) * s[a];
+    p.extended.lo[a] = p.cut[2 * a] ? p.clip.lo[a] - ext_mm : -kInf;
+    p.extended.hi[a] = p.cut[2 * a + 1] ? p.clip.hi[a] + ext_mm : kInf;
+    p.domain.lo[a] = std::max(p.field.origin[a] + s[a], p.extended.lo[a] - s[a]);
+    p.domain.hi[a] = std::min(p.field.upper()[a] - s[a], p.extended.hi[a] + s[a]);
+  }
+
+  // Iso-level whose enclosed volume (inside the clip box) equals the label's voxel volume:
+  // the smoothing then moves the surface but does not shrink the organ.
+  const double h = std::clamp(s.minCoeff() / 1.5, 0.25, std::min(0.5, o.edge_mm / 3.0));
+  p.fine = resample(p.field, p.domain, h);
+  std::vector<float> values;
+  for (std::int64_t k = 0; k < p.fine.n[2]; ++k)
+    for (std::int64_t j = 0; j < p.fine.n[1]; ++j)
+      for (std::int64_t i = 0; i < p.fine.n[0]; ++i) {
+        const Eigen::Vector3d q = p.fine.origin + Eigen::Vector3d(double(i), double(j), double(k)) * h;
+        if ((q.array() >= p.clip.lo.array()).all() && (q.array() <= p.clip.hi.array()).all())
+          values.push_back(p.fine.v[std::size_t(p.fine.index(i, j, k))]);
+      }
+  const auto want = std::int64_t(std::llround(p.label_volume_mm3 / (h * h * h)));
+  if (want > 0 && want < std::int64_t(values.size())) {
+    std::nth_element(values.begin(), values.begin() + (want - 1), values.end(), std::greater<float>());
+    p.iso = std::clamp(values[std::size_t(want - 1)], 0.2f, 0.8f);
+  }
+  return p;
+}
+
+Eigen::Vector3d to_lps(const ImageGrid& g, const Eigen::Vector3d& q) { return g.origin_lps_mm + g.direction_lps * q; }
+
+template <class M>
+void transform_to_lps(const ImageGrid& g, M& mesh) {
+  for (auto& v : mesh.vertices_lps_mm) v = to_lps(g, v);
+}
+
+bool inside(const Box& b, const Eigen::Vector3d& q) {
+  return (q.array() >= b.lo.array()).all() && (q.array() <= b.hi.array()).all();
+}
+
+SurfaceMesh make_surface(const LabelFunction& f, const Prepared& p, const MeshOptions& o, bool any_cut,
+                         std::vector<std::string>& notes) {
+  Mesh3Criteria c;
+  c.facet_size_mm = o.edge_mm;
+  c.facet_distance_mm = 0.075 * o.edge_mm;
+  c.facet_angle_deg = 30.0;
+  SurfaceMesh s = mesh3_surface(f, p.domain, c);
+  if (any_cut)
+    for (int a = 0; a < 3; ++a)
+      if (p.cut[2 * a] || p.cut[2 * a + 1])
+        s = clip_slab(s, a, p.cut[2 * a] ? p.clip.lo[a] : -1e9, p.cut[2 * a + 1] ? p.clip.hi[a] : 1e9);
+  RemeshParams rp;
+  rp.target_edge_mm = o.edge_mm;
+  rp.iterations = o.remesh_iterations;
+  rp.feature_angle_deg = any_cut ? 60.0 : 0.0;
+  return repair_and_remesh(s, rp, notes);
+}
+
+OrganMesh mesh_one(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOptions& o, Progress& progress) {
+  OrganMesh out;
+  out.spec = spec;
+  out.voxel_diagonal_mm = lm.grid.spacing_mm.norm();
+  const auto t0 = std::chrono::steady_clock::now();
+  Prepared p = prepare(lm, spec, o, out.warnings);
+  out.label_volume_mm3 = p.label_volume_mm3;
+  out.dropped_volume_mm3 = p.dropped_volume_mm3;
+  progress.check_cancelled();
+  const bool any_cut = std::any_of(p.cut.begin(), p.cut.end(), [](bool b) { return b; });
+  const float iso = p.iso;
+  const Field3& F = p.field;
+  const Box ext = p.extended;
+
+  // The organ (or lumen) surface.
+  const LabelFunction organ = [&](const Eigen::Vector3d& q) { return inside(ext, q) && F.sample(q) >= iso ? 1 : 0; };
+  std::vector<std::string> notes;
+  SurfaceMesh outer = make_surface(organ, p, o, any_cut, notes);
+  progress.check_cancelled();
+
+  Field3 sdf;
+  if (spec.model != OrganModel::solid) sdf = signed_distance(p.fine, iso);
+  const double t = spec.wall_mm;
+  const Box clip = p.clip;
+
+  std::vector<std::pair<std::string, SurfaceMesh>> extra;  // grid frame
+  SurfaceMesh tube_wall;
+  if (spec.model == OrganModel::wall_body) {
+    const LabelFunction body = [&](const Eigen::Vector3d& q) { return inside(ext, q) && sdf.sample(q) <= -t ? 1 : 0; };
+    bool has_body = false;
+    for (float v : sdf.v) has_body |= v <= -t;
+    if (has_body)
+      extra.emplace_back(spec.name + "_wall_inner", make_surface(body, p, o, any_cut, notes));
+    else
+      out.warnings.push_back(spec.name + " is nowhere thicker than twice its " + fmt(t) + " mm wall: wall only, no body");
+  } else if (spec.model == OrganModel::tube) {
+    const LabelFunction wall = [&](const Eigen::Vector3d& q) {
+      return inside(ext, q) && F.sample(q) < iso && sdf.sample(q) <= t ? 1 : 0;
+    };
+    tube_wall = make_surface(wall, p, o, true, notes);
+  }
+  for (auto& n : notes) out.warnings.push_back(spec.name + ": " + n);
+  out.seconds_surface = seconds_since(t0);
+  progress.check_cancelled();
+
+  // Tetrahedra.
+  const auto t1 = std::chrono::steady_clock::now();
+  if (o.tetrahedra) {
+    Mesh3Criteria c;
+    c.facet_size_mm = o.edge_mm;
+    c.facet_distance_mm = 0.075 * o.edge_mm;
+    c.facet_angle_deg = 25.0;
+    c.cell_size_mm = o.tet_size_mm > 0 ? o.tet_size_mm : o.edge_mm;
+    c.cell_radius_edge = o.max_radius_edge;
+    c.perturb_bound_deg = o.min_dihedral_deg + 2.0;
+    c.exude_bound_deg = o.min_dihedral_deg + 2.0;
+    // No time limit: a time-limited optimiser stops at a point that depends on the machine's
+    // load, and the output would no longer be reproducible. Both stop by themselves.
+    c.optimiser_seconds = 0.0;
+    // Measured on the phantom: ODT and bounds above 12° do not raise the smallest dihedral
+    // angle further (it sits at constrained boundary vertices) and cost time.
+    if (spec.model == OrganModel::tube) {
+      out.volume = mesh3_tets_polyhedral(tube_wall, kRegionTracheaWall, 60.0, c);
+      out.region_names[kRegionTracheaWall] = spec.name + "_wall";
+    } else if (spec.model == OrganModel::wall_body) {
+      const LabelFunction regions = [&](const Eigen::Vector3d& q) {
+        if (!inside(clip, q) || F.sample(q) < iso) return 0;
+        return sdf.sample(q) <= -t ? int(kRegionGallbladderBody) : int(kRegionGallbladderWall);
+      };
+      out.volume = mesh3_tets_implicit(regions, p.domain, c);
+      out.region_names[kRegionGallbladderBody] = spec.name + "_body";
+      out.region_names[kRegionGallbladderWall] = spec.name + "_wall";
+    } else {
+      const int region = kRegionSolidBase + spec.label;
+      const LabelFunction solid = [&](const Eigen::Vector3d& q) { return inside(clip, q) && F.sample(q) >= iso ? region : 0; };
+      out.volume = mesh3_tets_implicit(solid, p.domain, c);
+      out.region_names[region] = spec.name;
+    }
+    const TetImproveStats fix = improve_tets(out.volume, o.min_dihedral_deg, o.max_radius_edge);
+    if (fix.peeled_tets > 0)
+      out.warnings.push_back(spec.name + ": removed " + std::to_string(fix.peeled_tets) +
+                             " flat tetrahedra lying on the surface (below the quality gate)");
+    transform_to_lps(lm.grid, out.volume);
+    TetGuarantees tg;
+    tg.min_dihedral_deg = o.min_dihedral_deg;
+    tg.max_radius_edge = o.max_radius_edge;
+    out.volume_quality = measure_tets(out.volume, tg);
+  }
+  out.seconds_tets = seconds_since(t1);
+
+  // Surfaces to LPS, measured.
+  auto add = [&](std::string name, SurfaceMesh m, bool compare) {
+    transform_to_lps(lm.grid, m);
+    NamedSurface ns{std::move(name), std::move(m), {}};
+    ns.quality = measure_surface(ns.mesh, o.edge_mm);
+    if (compare) compare_with_label(ns.quality, ns.mesh, p.kept, 1, p.label_volume_mm3);
+    out.surfaces.push_back(std::move(ns));
+  };
+  add(spec.model == OrganModel::tube ? spec.name + "_lumen" : spec.name, std::move(outer), true);
+  for (auto& [name, m] : extra) add(name, std::move(m), false);
+  if (spec.model == OrganModel::tube) add(spec.name + "_wall", std::move(tube_wall), false);
+  return out;
+}
+
+}  // namespace
+
+OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Progress& progress) {
+  if (labels.grid.voxel_count() == 0 || labels.labels.size() == 0)
+    throw InputError(ExitCode::mesh_input, "the label map is empty (no voxels)", {}, "pass a segmented label map");
+  if (options.edge_mm <= 0 || !std::isfinite(options.edge_mm))
+    throw UsageError("the target edge length must be positive (got " + fmt(options.edge_mm) + " mm)");
+  OrganMeshes result;
+  std::vector<MeshOrganSpec> present;
+  for (const auto& spec : options.organs) {
+    if (labels.count(spec.label) > 0) {
+      present.push_back(spec);
+      continue;
+    }
+    const std::string msg = spec.name + ": label value " + std::to_string(spec.label) + " is not present in the label map";
+    if (!options.skip_absent)
+      throw InputError(ExitCode::mesh_input, msg, {}, "check the segmentation, or choose the organs to mesh");
+    result.warnings.push_back(msg + "; not meshed");
+  }
+  if (present.empty())
+    throw InputError(ExitCode::mesh_input, "none of the requested organs is present in the label map", {},
+                     "the label map holds no voxel of any requested organ's label value; check --organ");
+
+  std::vector<OrganMesh> meshed(present.size());
+  std::vector<std::exception_ptr> errors(present.size());
+  progress.report(0.0, "meshing organs");
+  tbb::parallel_for(std::size_t(0), present.size(), [&](std::size_t i) {
+    try {
+      meshed[i] = mesh_one(labels, present[i], options, progress);
+    } catch (...) {
+      errors[i] = std::current_exception();
+    }
+  });
+  for (auto& e : errors)
+    if (e) std::rethrow_exception(e);
+  progress.report(1.0, "meshing organs");
+  result.organs = std::move(meshed);
+
+  if (options.enforce_quality) {
+    std::string failures;
+    for (const auto& organ : result.organs) {
+      for (const auto& s : organ.surfaces)
+        for (const auto& f : s.quality.failures) failures += "\n  " + s.name + ": " + f;
+      for (const auto& f : organ.volume_quality.failures) failures += "\n  " + organ.spec.name + " tetrahedra: " + f;
+    }
+    if (!failures.empty())
+      throw MeshQualityError("the meshes fail their quality guarantees:" + failures,
+                             "try a smaller --edge-mm, or pass --allow-quality-failures to write them anyway");
+  }
+  return result;
+}
+
+}  // namespace organsmith

@@ -1,0 +1,113 @@
+#pragma once
+// Label map → simulation-ready organ meshes: closed outward surfaces remeshed to a target edge
+// length, organ walls as separate simulation bodies, and tetrahedral meshes with region ids,
+// every one checked against the guarantees in meshing/quality.h. All coordinates are LPS mm.
+//
+// How a surface is made (chosen by measurement; see meshing/README.md for the figures): the
+// organ's largest connected component is smoothed lightly (Gaussian, σ ≈ 0.6 voxel) and
+// interpolated trilinearly; CGAL Mesh_3 samples the iso-surface of that field at the level
+// whose enclosed volume equals the label's voxel volume (so the smoothing does not shrink the
+// organ), and CGAL Polygon Mesh Processing remeshes it isotropically to the target edge length,
+// improves the worst angles, fills holes, keeps the largest component and orients it outward.
+// Mesh_3 on the raw labeled image reproduces the voxel staircase instead (see README).
+
+#include "core/geometry.h"
+#include "core/progress.h"
+#include "core/volume.h"
+#include "meshing/quality.h"
+
+#include <cstdint>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace organsmith {
+
+/// How an organ is turned into simulation bodies.
+enum class OrganModel {
+  solid,      ///< one closed surface and one tetrahedral region
+  wall_body,  ///< gallbladder: a wall layer of `wall_mm` inside the surface plus the body (thesis §5.1.1)
+  tube,       ///< trachea: the label is the lumen; a tube wall of `wall_mm` around it, ends cut flat (§5.2)
+};
+
+/// One organ to mesh: its name, the label value it carries in the label map, and its model.
+struct MeshOrganSpec {
+  std::string name;
+  std::uint8_t label = 0;
+  OrganModel model = OrganModel::solid;
+  double wall_mm = 0.0;  ///< wall thickness for wall_body and tube (mm); ignored for solid
+};
+
+/// The default organs: gallbladder (label 1, 2 mm wall) and trachea (label 2, 2.5 mm wall).
+std::vector<MeshOrganSpec> default_organs();
+
+/// Options of `mesh_organs`.
+struct MeshOptions {
+  std::vector<MeshOrganSpec> organs = default_organs();
+  double edge_mm = 1.5;              ///< target surface edge length (mm), default 1.5
+  double smoothing_sigma_vox = 0.6;  ///< Gaussian σ of the mask before iso-surfacing, in voxels of each axis
+  double max_smoothing_sigma_mm = 1.5;  ///< cap on σ along thick-slice axes (mm)
+  int remesh_iterations = 6;         ///< isotropic remeshing iterations
+  bool tetrahedra = true;            ///< also build tetrahedral meshes
+  double tet_size_mm = 0.0;          ///< tetrahedron circumradius bound (mm); 0 = 1.5 × edge_mm
+  double min_dihedral_deg = 10.0;    ///< quality gate: every tet's smallest dihedral angle (deg)
+  double max_radius_edge = 2.0;      ///< quality gate: every tet's circumradius / shortest edge
+  bool enforce_quality = true;       ///< throw MeshQualityError when a gate fails (else only report)
+  bool skip_absent = true;           ///< an organ absent from the label map is skipped with a warning
+};
+
+/// One named triangle surface of an organ ("gallbladder", "gallbladder_wall_inner",
+/// "trachea_wall", "trachea_lumen") and its measured quality.
+struct NamedSurface {
+  std::string name;
+  SurfaceMesh mesh;
+  SurfaceQuality quality;
+};
+
+/// Everything built for one organ.
+struct OrganMesh {
+  MeshOrganSpec spec;
+  std::vector<NamedSurface> surfaces;      ///< first: the organ's outer surface
+  TetMesh volume;                          ///< empty when tetrahedra are off
+  std::map<std::int32_t, std::string> region_names;  ///< tet region id → name ("gallbladder_wall", …)
+  TetQuality volume_quality;
+  double label_volume_mm3 = 0.0;           ///< voxel volume of the meshed component (and capped slab)
+  double dropped_volume_mm3 = 0.0;         ///< voxels outside the largest component, not meshed
+  double voxel_diagonal_mm = 0.0;
+  std::vector<std::string> warnings;       ///< e.g. "touches the image border; capped flat"
+  double seconds_surface = 0.0, seconds_tets = 0.0;
+};
+
+struct OrganMeshes {
+  std::vector<OrganMesh> organs;
+  std::vector<std::string> warnings;  ///< organs skipped and why
+};
+
+/// Region ids used in tetrahedral meshes (stable across runs and files).
+inline constexpr std::int32_t kRegionGallbladderBody = 1;
+inline constexpr std::int32_t kRegionGallbladderWall = 2;
+inline constexpr std::int32_t kRegionTracheaWall = 3;
+/// Solid organs use kRegionSolidBase + their label value.
+inline constexpr std::int32_t kRegionSolidBase = 100;
+
+/// Meshes every organ of `options.organs` found in `labels`. Organs run in parallel (TBB);
+/// each one is deterministic: the same label map and options give identical meshes.
+/// Throws MeshInputError (naming the organ) for an empty label map, a requested organ absent
+/// when `skip_absent` is false, or a mask too small to mesh; MeshQualityError when a quality
+/// gate fails and `enforce_quality` is set; Cancelled when `progress` asks to stop.
+OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Progress& progress);
+
+}  // namespace organsmith
+
+#include "core/errors.h"
+
+namespace organsmith {
+
+/// A mesh that fails its quality gate (ExitCode::mesh_quality). The message lists every
+/// failing figure per surface.
+class MeshQualityError : public Error {
+ public:
+  explicit MeshQualityError(std::string message, std::string hint = {});
+};
+
+}  // namespace organsmith

@@ -1,0 +1,77 @@
+// CGAL Mesh_3 inside a closed triangle surface with protected sharp features: the tetrahedra
+// of the trachea wall, whose flat end caps meet the tube in sharp rims that an implicit domain
+// would round off. The second heavy CGAL translation unit.
+
+#include "meshing/detail.h"
+
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Mesh_complex_3_in_triangulation_3.h>
+#include <CGAL/Mesh_criteria_3.h>
+#include <CGAL/Mesh_triangulation_3.h>
+#include <CGAL/Polyhedral_mesh_domain_with_features_3.h>
+#include <CGAL/Surface_mesh.h>
+#include <CGAL/make_mesh_3.h>
+
+#include <stdexcept>
+#include <unordered_map>
+
+namespace organsmith::meshing_detail {
+namespace {
+
+using K = CGAL::Exact_predicates_inexact_constructions_kernel;
+using Point = K::Point_3;
+using Mesh = CGAL::Surface_mesh<Point>;
+using Domain = CGAL::Polyhedral_mesh_domain_with_features_3<K, Mesh>;
+using Tr = CGAL::Mesh_triangulation_3<Domain, CGAL::Default, CGAL::Sequential_tag>::type;
+using C3t3 = CGAL::Mesh_complex_3_in_triangulation_3<Tr, Domain::Corner_index, Domain::Curve_index>;
+using Criteria = CGAL::Mesh_criteria_3<Tr>;
+
+}  // namespace
+
+TetMesh mesh3_tets_polyhedral(const SurfaceMesh& closed, std::int32_t region, double feature_angle_deg,
+                              const Mesh3Criteria& c) {
+  namespace params = CGAL::parameters;
+  Mesh mesh;
+  std::vector<Mesh::Vertex_index> vs;
+  vs.reserve(closed.vertices_lps_mm.size());
+  for (const auto& p : closed.vertices_lps_mm) vs.push_back(mesh.add_vertex(Point(p.x(), p.y(), p.z())));
+  for (const auto& t : closed.triangles)
+    if (mesh.add_face(vs[t[0]], vs[t[1]], vs[t[2]]) == Mesh::null_face())
+      throw std::runtime_error("tetrahedral meshing: the surface is not a manifold triangle mesh");
+
+  CGAL::get_default_random() = CGAL::Random(0);
+  Domain domain(mesh);
+  domain.detect_features(feature_angle_deg);
+  const double edge = c.edge_size_mm > 0 ? c.edge_size_mm : c.facet_size_mm;
+  Criteria criteria(params::edge_size = edge, params::facet_angle = c.facet_angle_deg,
+                    params::facet_size = c.facet_size_mm, params::facet_distance = c.facet_distance_mm,
+                    params::cell_radius_edge_ratio = c.cell_radius_edge, params::cell_size = c.cell_size_mm);
+  C3t3 c3t3 = CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(), params::no_exude());
+  if (c.odt_seconds > 0) CGAL::odt_optimize_mesh_3(c3t3, domain, params::time_limit = c.odt_seconds);
+  if (c.perturb_bound_deg > 0)
+    CGAL::perturb_mesh_3(c3t3, domain, params::time_limit = c.optimiser_seconds, params::sliver_bound = c.perturb_bound_deg);
+  if (c.exude_bound_deg > 0)
+    CGAL::exude_mesh_3(c3t3, params::time_limit = c.optimiser_seconds, params::sliver_bound = c.exude_bound_deg);
+
+  const Tr& tr = c3t3.triangulation();
+  TetMesh out;
+  std::unordered_map<Tr::Vertex_handle, std::int32_t> index;
+  auto id = [&](Tr::Vertex_handle v) {
+    auto [it, fresh] = index.emplace(v, std::int32_t(out.vertices_lps_mm.size()));
+    if (fresh) {
+      const Point p = tr.geom_traits().construct_point_3_object()(v->point());
+      out.vertices_lps_mm.emplace_back(p.x(), p.y(), p.z());
+    }
+    return it->second;
+  };
+  for (auto cit = c3t3.cells_in_complex_begin(); cit != c3t3.cells_in_complex_end(); ++cit) {
+    std::array<std::int32_t, 4> t{id(cit->vertex(0)), id(cit->vertex(1)), id(cit->vertex(2)), id(cit->vertex(3))};
+    const auto& p = out.vertices_lps_mm;
+    if ((p[t[1]] - p[t[0]]).dot((p[t[2]] - p[t[0]]).cross(p[t[3]] - p[t[0]])) < 0) std::swap(t[2], t[3]);
+    out.tets.push_back(t);
+    out.region_ids.push_back(region);
+  }
+  return out;
+}
+
+}  // namespace organsmith::meshing_detail
