@@ -8,6 +8,7 @@
 #include "meshing/tet_improve.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
@@ -397,11 +398,16 @@ OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Prog
   std::vector<std::exception_ptr> errors(present.size());
   progress.report(0.0, "meshing organs");
   tbb::parallel_for(std::size_t(0), present.size(), [&](std::size_t i) {
-    try {
-      meshed[i] = mesh_one(labels, present[i], options, progress);
-    } catch (...) {
-      errors[i] = std::current_exception();
-    }
+    // Isolated: while this organ waits in its own nested parallel loops, its thread must not
+    // pick up the other organ's task, which would reset and draw from the same thread's CGAL
+    // random generator. (Output still varies between calls: see the disabled determinism test.)
+    tbb::this_task_arena::isolate([&] {
+      try {
+        meshed[i] = mesh_one(labels, present[i], options, progress);
+      } catch (...) {
+        errors[i] = std::current_exception();
+      }
+    });
   });
   for (auto& e : errors)
     if (e) std::rethrow_exception(e);
