@@ -3,6 +3,8 @@
 
 #include "meshing/export.h"
 
+#include "core/file_io.h"
+
 #include "core/errors.h"
 
 #include <Eigen/Geometry>
@@ -33,26 +35,7 @@ std::string num(double v) {
 Eigen::Vector3d out_point(const Eigen::Vector3d& p, bool ras) { return ras ? lps_to_ras(p) : p; }
 
 /// Writes `bytes` to `path` atomically.
-void write_atomic(const fs::path& path, const std::string& bytes) {
-  const fs::path tmp = path.parent_path() / ("." + path.filename().string() + ".tmp" + std::to_string(::getpid()));
-  {
-    std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-    if (!f) throw OutputError("cannot create the file", tmp, "check that the directory exists and is writable");
-    f.write(bytes.data(), std::streamsize(bytes.size()));
-    f.flush();
-    if (!f) {
-      std::error_code ec;
-      fs::remove(tmp, ec);
-      throw OutputError("cannot write the file (disk full?)", tmp, "free some space and retry");
-    }
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) {
-    fs::remove(tmp, ec);
-    throw OutputError("cannot move the finished file into place", path, "check permissions of the output directory");
-  }
-}
+void write_atomic(const fs::path& path, const std::string& bytes) { write_file_atomic(path, bytes); }
 
 template <class T>
 void put(std::string& s, T v) {

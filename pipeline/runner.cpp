@@ -1,6 +1,7 @@
 #include "pipeline/runner.h"
 
 #include "core/errors.h"
+#include "core/file_io.h"
 #include "core/sha256.h"
 #include "organsmith_version.h"  // generated at build time: version and git commit
 #include "pipeline/ingest.h"
@@ -473,22 +474,7 @@ void commit_directory(const fs::path& staging_dir, const fs::path& final_dir) {
   if (!old.empty()) fs::remove_all(old, ec);
 }
 
-void write_text_atomic(const fs::path& path, const std::string& text) {
-  const fs::path tmp = path.parent_path() / ("." + path.filename().string() + ".tmp");
-  {
-    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-    out << text;
-    out.flush();
-    if (!out) {
-      std::error_code ec;
-      fs::remove(tmp, ec);
-      throw OutputError("cannot write the file", path, "check that the directory is writable and the disk not full");
-    }
-  }
-  std::error_code ec;
-  fs::rename(tmp, path, ec);
-  if (ec) throw OutputError("cannot move the file into place: " + ec.message(), path);
-}
+void write_text_atomic(const fs::path& path, const std::string& text) { write_file_atomic(path, text); }
 
 const std::vector<std::string>& stage_names() {
   static const std::vector<std::string> names = {"phantom", "ingest", "segment", "mesh", "attach", "snapshot"};

@@ -1,0 +1,36 @@
+#include "core/file_io.h"
+
+#include "core/errors.h"
+
+#include <unistd.h>
+
+#include <fstream>
+#include <string>
+
+namespace organsmith {
+
+void write_file_atomic(const std::filesystem::path& path, std::string_view bytes) {
+  namespace fs = std::filesystem;
+  // The process id keeps two writers of the same path from sharing a temporary file.
+  const fs::path tmp = path.parent_path() / ("." + path.filename().string() + ".tmp" + std::to_string(::getpid()));
+  {
+    std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+    if (!out) throw OutputError("cannot create the file", tmp, "check that the directory exists and is writable");
+    out.write(bytes.data(), std::streamsize(bytes.size()));
+    out.flush();
+    if (!out) {
+      std::error_code ec;
+      fs::remove(tmp, ec);
+      throw OutputError("cannot write the file", path, "check that the directory is writable and the disk not full");
+    }
+  }
+  std::error_code ec;
+  fs::rename(tmp, path, ec);
+  if (ec) {
+    fs::remove(tmp, ec);
+    throw OutputError("cannot move the file into place: " + ec.message(), path,
+                      "check the permissions of the output directory");
+  }
+}
+
+}  // namespace organsmith
