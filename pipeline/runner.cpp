@@ -215,8 +215,13 @@ class Runner {
 
   /// snapshot renders the review PNGs of everything the earlier stages left in the output.
   void write_snapshots(const fs::path& staging) {
+    // The scene loader reads the case (organs, input) from the manifest: record the stages so
+    // far first (the final manifest replaces it when the run ends).
+    write_text_atomic(out_ / "manifest.json", manifest().dump(2) + "\n");
+    LoadFlags flags;
+    flags.ct = input_.string();
     OutputScene os;
-    load_output_scene(out_, LoadFlags{}, os, progress_);
+    load_output_scene(out_, flags, os, progress_);
     for (const auto& m : os.missing) spdlog::info("snapshot: not found: {}", m);
     fs::create_directories(staging / "snapshots");
     const auto written = render_snapshots(os.scene, SnapshotOptions{}, staging / "snapshots", progress_);
