@@ -103,17 +103,9 @@ int run_mesh(const MeshFlags& f) {
   for (const auto& w : meshes.warnings) spdlog::warn("{}", w);
 
   const fs::path final_dir = fs::absolute(f.out);
-  fs::create_directories(final_dir.parent_path());
-  const fs::path staging = make_staging_dir(final_dir);
   std::vector<std::string> warnings;
-  try {
-    export_meshes(meshes, staging, eo, &warnings);
-    commit_directory(staging, final_dir);
-  } catch (...) {
-    std::error_code ec;
-    fs::remove_all(staging, ec);
-    throw;
-  }
+  write_directory_atomically(final_dir,
+                             [&](const fs::path& staging) { export_meshes(meshes, staging, eo, &warnings); });
   for (const auto& organ : meshes.organs) {
     for (const auto& w : organ.warnings) spdlog::warn("{}", w);
     for (const auto& s : organ.surfaces) {

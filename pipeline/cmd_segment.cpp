@@ -98,9 +98,7 @@ int run_segment(const SegmentFlags& f) {
   progress.finish();
 
   const fs::path final_dir = fs::absolute(f.out);
-  fs::create_directories(final_dir.parent_path());
-  const fs::path staging = make_staging_dir(final_dir);
-  try {
+  write_directory_atomically(final_dir, [&](const fs::path& staging) {
     write_label_map(r.labels, staging / "labels.nii.gz");
     nlohmann::json summary = {{"input_format", in.report.format}, {"organs", nlohmann::json::array()}};
     for (const auto& o : r.organs) {
@@ -113,12 +111,7 @@ int run_segment(const SegmentFlags& f) {
     }
     write_text_atomic(staging / "segmentation.json", summary.dump(2) + "\n");
     write_overlays(in.volume, r, staging);
-    commit_directory(staging, final_dir);
-  } catch (...) {
-    std::error_code ec;
-    fs::remove_all(staging, ec);
-    throw;
-  }
+  });
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   for (const auto& o : r.organs)
     spdlog::info("{}: {:.2f} ml on slices {}–{} ({})", o.organ, o.volume_ml, o.first_slice, o.last_slice,

@@ -54,16 +54,10 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
     throw InputError(ExitCode::input_not_found, "nothing to draw: no CT, label map or meshes found", out,
                      "run `organsmith run --out " + out_arg + "` first");
   const fs::path final_dir = out / "snapshots";
-  const fs::path staging = make_staging_dir(final_dir);
   std::vector<fs::path> written;
-  try {
+  write_directory_atomically(final_dir, [&](const fs::path& staging) {
     written = render_snapshots(os.scene, options, staging, progress);
-    commit_directory(staging, final_dir);
-  } catch (...) {
-    std::error_code ec;
-    fs::remove_all(staging, ec);
-    throw;
-  }
+  });
   progress.finish();
   std::cout << "organsmith wrote " << written.size() << " snapshots (" << options.width_px << "x" << options.height_px
             << ") into " << final_dir.string() << ":\n";

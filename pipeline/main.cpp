@@ -113,17 +113,10 @@ int cmd_phantom(const fs::path& out, const PhantomOptions& options) {
   TerminalProgress progress(spdlog::get_level() >= spdlog::level::warn);
   const auto t0 = std::chrono::steady_clock::now();
   const fs::path final_dir = fs::absolute(out);
-  fs::create_directories(final_dir.parent_path());
-  const fs::path staging = make_staging_dir(final_dir);
-  try {
+  write_directory_atomically(final_dir, [&](const fs::path& staging) {
     const Phantom ph = synthesize_phantom(options, progress);
     write_phantom_files(ph, options, staging, progress);
-    commit_directory(staging, final_dir);
-  } catch (...) {
-    std::error_code ec;
-    fs::remove_all(staging, ec);
-    throw;
-  }
+  });
   progress.finish();
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   spdlog::info("phantom written to {} in {:.2f} s: dicom/ (CT series), ground_truth.nii.gz, seeds.json",

@@ -479,6 +479,19 @@ void commit_directory(const fs::path& staging_dir, const fs::path& final_dir) {
   if (!old.empty()) fs::remove_all(old, ec);
 }
 
+void write_directory_atomically(const fs::path& final_dir, const std::function<void(const fs::path&)>& write) {
+  fs::create_directories(final_dir.parent_path());
+  const fs::path staging = make_staging_dir(final_dir);
+  try {
+    write(staging);
+    commit_directory(staging, final_dir);
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(staging, ec);
+    throw;
+  }
+}
+
 void write_text_atomic(const fs::path& path, const std::string& text) { write_file_atomic(path, text); }
 
 const std::vector<std::string>& stage_names() {

@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -48,6 +49,12 @@ void commit_directory(const std::filesystem::path& staging_dir, const std::files
 
 /// A fresh staging directory next to `final_path` (same file system, so renames are atomic).
 std::filesystem::path make_staging_dir(const std::filesystem::path& final_path);
+
+/// Creates `final_dir` as a whole: `write` fills a staging directory beside it, which then
+/// replaces `final_dir` (see commit_directory). On any exception the staging directory is
+/// removed and the exception passes on, so a failed write leaves nothing behind.
+void write_directory_atomically(const std::filesystem::path& final_dir,
+                                const std::function<void(const std::filesystem::path& staging)>& write);
 
 /// Writes `text` to `path` atomically (temporary file in the same directory, then rename).
 void write_text_atomic(const std::filesystem::path& path, const std::string& text);
