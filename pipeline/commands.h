@@ -23,5 +23,9 @@ std::vector<Command> segmentation_commands(CLI::App& app);
 std::vector<Command> meshing_commands(CLI::App& app);
 /// `snapshot`, `preview` (viewer; pipeline/cmd_viewer.cpp).
 std::vector<Command> viewer_commands(CLI::App& app);
+/// `degrade` (physics, clip degradation; pipeline/cmd_degrade.cpp).
+std::vector<Command> degradation_commands(CLI::App& app);
+/// `guide`, `haptics` (physics, guidance paths and the force loop; pipeline/cmd_haptics.cpp).
+std::vector<Command> haptics_commands(CLI::App& app);
 
 }  // namespace organsmith

@@ -217,7 +217,8 @@ int main(int argc, char** argv) {
   run_flags.add_to(run);
 
   std::vector<Command> commands;
-  for (auto* add : {&segmentation_commands, &meshing_commands, &physics_commands, &viewer_commands})
+  for (auto* add : {&segmentation_commands, &meshing_commands, &physics_commands, &degradation_commands,
+                     &haptics_commands, &viewer_commands})
     for (auto& c : (*add)(app)) commands.push_back(std::move(c));
 
   try {
