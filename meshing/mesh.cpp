@@ -400,7 +400,7 @@ OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Prog
   tbb::parallel_for(std::size_t(0), present.size(), [&](std::size_t i) {
     // Isolated: while this organ waits in its own nested parallel loops, its thread must not
     // pick up the other organ's task, which would reset and draw from the same thread's CGAL
-    // random generator. (Output still varies between calls: see the disabled determinism test.)
+    // random generator.
     tbb::this_task_arena::isolate([&] {
       try {
         meshed[i] = mesh_one(labels, present[i], options, progress);

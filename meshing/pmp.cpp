@@ -219,6 +219,39 @@ SurfaceMesh repair_and_remesh(const SurfaceMesh& in, const RemeshParams& p, std:
   return from_cgal(std::move(m));
 }
 
+namespace {
+
+/// Puts a surface in a canonical order: vertices sorted by coordinates, each triangle starting
+/// at its smallest index (orientation kept), triangles sorted. PMP::clip returns the same
+/// geometry in an order that varies from call to call (its intersection search depends on
+/// where the heap placed things); everything after it must not see that.
+SurfaceMesh canonical_order(const SurfaceMesh& in) {
+  const auto& v = in.vertices_lps_mm;
+  std::vector<std::int32_t> order(v.size());
+  for (std::size_t i = 0; i < order.size(); ++i) order[i] = std::int32_t(i);
+  std::sort(order.begin(), order.end(), [&](std::int32_t a, std::int32_t b) {
+    return std::lexicographical_compare(v[a].data(), v[a].data() + 3, v[b].data(), v[b].data() + 3);
+  });
+  std::vector<std::int32_t> rank(v.size());
+  SurfaceMesh out;
+  out.vertices_lps_mm.reserve(v.size());
+  for (std::size_t r = 0; r < order.size(); ++r) {
+    rank[order[r]] = std::int32_t(r);
+    out.vertices_lps_mm.push_back(v[order[r]]);
+  }
+  out.triangles.reserve(in.triangles.size());
+  for (const auto& t : in.triangles) {
+    std::array<std::int32_t, 3> u{rank[t[0]], rank[t[1]], rank[t[2]]};
+    const auto first = std::min_element(u.begin(), u.end()) - u.begin();
+    std::rotate(u.begin(), u.begin() + first, u.end());
+    out.triangles.push_back(u);
+  }
+  std::sort(out.triangles.begin(), out.triangles.end());
+  return out;
+}
+
+}  // namespace
+
 SurfaceMesh clip_slab(const SurfaceMesh& in, int axis, double lo, double hi) {
   Mesh m = to_cgal(in);
   std::array<double, 3> n{0, 0, 0};
@@ -229,7 +262,7 @@ SurfaceMesh clip_slab(const SurfaceMesh& in, int axis, double lo, double hi) {
   ok = ok && PMP::clip(m, K::Plane_3(n[0], n[1], n[2], -hi), CGAL::parameters::clip_volume(true));
   if (!ok || !CGAL::is_closed(m))
     throw std::runtime_error("the flat cut of the surface did not close (the sampled surface self-intersects)");
-  return from_cgal(std::move(m));
+  return canonical_order(from_cgal(std::move(m)));
 }
 
 }  // namespace organsmith::meshing_detail
