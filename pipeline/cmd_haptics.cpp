@@ -1,8 +1,336 @@
-// Placeholder while the command is being written.
+// `guide` (guidance paths of a run's output directory: trachea centreline and incision,
+// gallbladder dissection, or a user's recorded path) and `haptics` (replays a scripted trajectory
+// through the 1 kHz force loop and reports path following, forces and loop timing).
+// The science is in physics/HAPTICS.md.
+
+#include "core/errors.h"
+#include "meshing/export.h"
+#include "physics/contact.h"
+#include "physics/guidance.h"
+#include "physics/haptic_loop.h"
+#include "physics/paths.h"
+#include "physics/presets.h"
 #include "pipeline/commands.h"
+#include "pipeline/guide_stage.h"
+#include "pipeline/image_io.h"
+#include "pipeline/runner.h"
+
+#include <nlohmann/json.hpp>
+#include <spdlog/spdlog.h>
+
+#include <cmath>
+#include <fstream>
+#include <iostream>
+#include <memory>
 
 namespace organsmith {
 
-std::vector<Command> haptics_commands(CLI::App&) { return {}; }
+namespace fs = std::filesystem;
+using namespace organsmith::physics;
+
+namespace {
+
+void require_out_dir(const fs::path& out) {
+  std::error_code ec;
+  if (!fs::is_directory(out, ec))
+    throw InputError(ExitCode::input_not_found, "no such output directory", out,
+                     "give the directory `organsmith run --out` wrote (default: out)");
+}
+
+/// The label map of a run: the segmentation, else the phantom's ground truth.
+LabelMap run_labels(const fs::path& out) {
+  fs::path f = out / "labels.nii.gz";
+  if (!fs::exists(f) && fs::exists(out / "phantom" / "ground_truth.nii.gz")) f = out / "phantom" / "ground_truth.nii.gz";
+  if (!fs::exists(f))
+    throw InputError(ExitCode::input_not_found, "no label map in the output directory", out / "labels.nii.gz",
+                     "run `organsmith run` into this directory first");
+  return read_label_map(f);
+}
+
+bool is_builtin(const std::string& name) {
+  const auto& n = builtin_path_names();
+  return std::find(n.begin(), n.end(), name) != n.end();
+}
+
+// ---- guide ---------------------------------------------------------------------------------------
+
+struct GuideFlags {
+  std::string out, path;
+  GuideStageOptions options;
+};
+
+int run_guide(const GuideFlags& f) {
+  const fs::path out = f.out;
+  require_out_dir(out);
+  GuideStageOptions options = f.options;
+  std::optional<Polyline> user;
+  if (!f.path.empty()) {
+    if (is_builtin(f.path)) {
+      options.only = {f.path};
+    } else if (fs::is_regular_file(f.path)) {
+      user = read_path_file(f.path);
+      check_path_within(*user, run_labels(out).grid, f.path);
+    } else {
+      throw UsageError("--path '" + f.path + "' is neither a path name nor a file",
+                       "names: trachea_centerline, trachea_incision, gallbladder_dissection; or a CSV/JSON file");
+    }
+  }
+  // Stage every file, then move them into OUT_DIR/paths: a failure leaves nothing behind.
+  const fs::path dest = out / "paths";
+  const fs::path staging = make_staging_dir(out / ".paths");
+  std::vector<std::string> written;
+  try {
+    if (user) {
+      user->name = fs::path(f.path).stem().string();
+      write_text_atomic(staging / (user->name + ".json"),
+                        path_json(*user, {{"recorded", 1.0}, {"length_mm", user->length_mm()}}));
+      write_text_atomic(staging / (user->name + ".vtp"), path_vtp(*user));
+      written = {user->name + ".json", user->name + ".vtp"};
+    } else {
+      written = write_guidance_paths(out, staging, options);
+    }
+    fs::create_directories(dest);
+    for (const auto& w : written) fs::rename(staging / w, dest / w);
+    fs::remove_all(staging);
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(staging, ec);
+    throw;
+  }
+  for (const auto& w : written) std::cout << "wrote " << (dest / w).string() << "\n";
+  return 0;
+}
+
+// ---- haptics -------------------------------------------------------------------------------------
+
+struct HapticsFlags {
+  std::string out, trajectory, mode = "mixed", report, path = "trachea_incision";
+  LoopOptions loop;
+  ContactOptions contact;
+  std::vector<double> xi, bands;
+  bool offline = false;
+};
+
+/// The calibrated law of an organ region, from OUT_DIR/materials.json (the attach stage), else the
+/// built-in preset of that region.
+StressTable region_table(const fs::path& out, const std::string& region) {
+  Material m;
+  ModelOptions mo;
+  const fs::path mf = out / "materials.json";
+  bool found = false;
+  if (fs::exists(mf)) {
+    std::ifstream in(mf);
+    nlohmann::json j;
+    try {
+      j = nlohmann::json::parse(in);
+    } catch (const nlohmann::json::exception& e) {
+      throw InputError(ExitCode::unsupported_input, std::string("materials.json is not valid JSON: ") + e.what(), mf,
+                       "rerun the attach stage (`organsmith run --force`)");
+    }
+    if (j.contains("regions") && j["regions"].contains(region)) {
+      const auto& r = j["regions"][region];
+      try {
+        m.model = r.at("model").get<std::string>();
+        for (const auto& p : r.at("parameters"))
+          m.parameters.push_back({p.at("name").get<std::string>(), p.at("value").get<double>(), p.value("unit", "")});
+        if (r.contains("constants") && r["constants"].contains("bulk_modulus_Pa"))
+          mo.bulk_modulus_Pa = r["constants"]["bulk_modulus_Pa"].get<double>();
+      } catch (const nlohmann::json::exception& e) {
+        throw InputError(ExitCode::unsupported_input, "region " + region + " of materials.json is malformed: " + e.what(), mf);
+      }
+      found = true;
+    }
+  }
+  if (!found) {
+    const MaterialLibrary lib = builtin_material_library();
+    const auto it = lib.regions.find(region);
+    if (it == lib.regions.end()) throw InputError(ExitCode::unsupported_input, "no material for region " + region, mf);
+    const MaterialPreset& preset = lib.find(it->second);
+    m = preset.material;
+    mo = model_options_for(preset);
+    spdlog::warn("haptics: {} not in {}; using the built-in preset {}", region, mf.string(), preset.id);
+  }
+  return StressTable::from_material(m, mo, 0.6);
+}
+
+nlohmann::json percentiles_json(const Percentiles& p) {
+  return {{"p50", p.p50}, {"p99", p.p99}, {"p99_9", p.p999}, {"max", p.max}};
+}
+
+int run_haptics(HapticsFlags f) {
+  const fs::path out = f.out;
+  require_out_dir(out);
+  f.loop.mode = parse_force_mode(f.mode);
+  if (!f.xi.empty()) {
+    if (f.xi.size() != 3) throw UsageError("--xi takes three stiffnesses (N/mm)", "e.g. --xi 0.3,0.6,0.9");
+    f.loop.guidance.xi_N_per_mm = {f.xi[0], f.xi[1], f.xi[2]};
+  }
+  if (!f.bands.empty()) {
+    if (f.bands.size() != 2) throw UsageError("--bands takes two distances (mm)", "e.g. --bands 2,5");
+    f.loop.guidance.band_edges_mm = {f.bands[0], f.bands[1]};
+  }
+  validate(f.loop);
+  validate(f.contact);
+  ScriptedDevice device = ScriptedDevice::read_csv(f.trajectory);
+  const LabelMap labels = run_labels(out);
+
+  // The path.
+  Polyline path;
+  if (is_builtin(f.path)) {
+    const fs::path pf = out / "paths" / (f.path + ".json");
+    if (!fs::exists(pf))
+      throw InputError(ExitCode::input_not_found, "no guidance path " + f.path, pf,
+                       "run `organsmith guide " + out.string() + "` (or `organsmith run`) first");
+    path = read_path_file(pf);
+  } else if (fs::is_regular_file(f.path)) {
+    path = read_path_file(f.path);
+    check_path_within(path, labels.grid, f.path);
+  } else {
+    throw UsageError("--path '" + f.path + "' is neither a path name nor a file");
+  }
+  const PathIndex path_index(path);
+
+  // The organs to touch: those in the label map, with their calibrated laws.
+  std::vector<SurfaceMesh> surfaces;
+  std::vector<StressTable> tables;
+  nlohmann::json organs = nlohmann::json::array();
+  struct OrganSurface {
+    std::uint8_t label;
+    const char *organ, *surface, *region;
+  };
+  for (const OrganSurface& o : {OrganSurface{1, "gallbladder", "gallbladder", "gallbladder_body"},
+                                OrganSurface{2, "trachea", "trachea_wall", "trachea_wall"}}) {
+    if (labels.count(o.label) == 0) continue;
+    const fs::path sf = out / "meshes" / o.organ / (std::string(o.surface) + ".stl");
+    if (!fs::exists(sf))
+      throw InputError(ExitCode::input_not_found, std::string("missing organ surface ") + o.surface + ".stl", sf,
+                       "run the mesh stage (`organsmith run`) first");
+    surfaces.push_back(read_stl(sf));
+    tables.push_back(region_table(out, o.region));
+    organs.push_back({{"organ", o.organ}, {"surface", fs::relative(sf, out).generic_string()}, {"law_region", o.region},
+                      {"triangles", surfaces.back().triangles.size()}});
+  }
+  std::unique_ptr<ContactModel> contact;
+  if (!surfaces.empty()) contact = std::make_unique<ContactModel>(SurfaceIndex(std::move(surfaces)), std::move(tables), f.contact);
+
+  f.loop.trace_capacity = std::size_t(device.duration_s() * f.loop.rate_Hz * 1.25) + 2000;
+  HapticLoop loop(device, &path_index, contact.get(), f.loop);
+  if (f.offline) {
+    const double dt = 1.0 / f.loop.rate_Hz;
+    for (std::int64_t i = 0; double(i) * dt <= device.duration_s(); ++i) loop.tick(double(i) * dt);
+  } else {
+    loop.start();
+    loop.wait(device.duration_s() + 10.0);
+    loop.stop();
+  }
+  const LoopStats st = loop.stats();
+  const std::vector<TraceSample> trace = loop.trace();
+  if (trace.empty()) throw Error(ExitCode::internal, "the haptic loop produced no tick");
+
+  double se = 0, emax = 0, dse = 0, dmax = 0, fsum = 0, fmax = 0, gsum = 0, gmax = 0, rsum = 0, rmax = 0, contact_s = 0;
+  std::array<double, 3> band_s{0, 0, 0};
+  for (std::size_t i = 0; i < trace.size(); ++i) {
+    const TraceSample& t = trace[i];
+    const double dt = i + 1 < trace.size() ? trace[i + 1].t_s - t.t_s : 1.0 / f.loop.rate_Hz;
+    se += t.distance_mm * t.distance_mm;
+    emax = std::max(emax, t.distance_mm);
+    const double dd = path_index.nearest(to_eigen(t.device_lps_mm)).distance_mm;
+    dse += dd * dd;
+    dmax = std::max(dmax, dd);
+    const double fm = to_eigen(t.force_N).norm();
+    fsum += fm, fmax = std::max(fmax, fm);
+    gsum += t.guidance_N, gmax = std::max(gmax, t.guidance_N);
+    rsum += t.reaction_N, rmax = std::max(rmax, t.reaction_N);
+    band_s[std::size_t(t.band)] += dt;
+    if (t.contact) contact_s += dt;
+  }
+  const double n = double(trace.size());
+  nlohmann::json r;
+  r["mode"] = mode_name(f.loop.mode);
+  r["weights"] = {{"guidance", weights(f.loop.mode).guidance}, {"reaction", weights(f.loop.mode).reaction}};
+  r["path"] = {{"name", path.name}, {"length_mm", path.length_mm()}, {"points", path.points_lps_mm.size()}};
+  r["trajectory"] = {{"file", f.trajectory}, {"duration_s", device.duration_s()}, {"samples", device.times_s().size()}};
+  r["replay"] = f.offline ? "offline (ticks computed back to back at the nominal times)" : "real time (loop thread)";
+  r["tool_path_error_mm"] = {{"rms", std::sqrt(se / n)}, {"max", emax}};
+  r["device_path_error_mm"] = {{"rms", std::sqrt(dse / n)}, {"max", dmax}};
+  r["guidance"] = {{"xi_N_per_mm", f.loop.guidance.xi_N_per_mm}, {"band_edges_mm", f.loop.guidance.band_edges_mm},
+                   {"time_in_band_s", band_s}};
+  r["force_N"] = {{"peak", fmax}, {"mean", fsum / n}, {"limit", f.loop.force_limit_N}};
+  r["guidance_force_N"] = {{"peak", gmax}, {"mean", gsum / n}};
+  r["reaction_force_N"] = {{"peak", rmax}, {"mean", rsum / n}};
+  r["contact"] = {{"time_s", contact_s}, {"tool_radius_mm", f.contact.tool_radius_mm},
+                  {"reference_length_mm", f.contact.reference_length_mm}, {"organs", organs}};
+  r["loop"] = {{"rate_Hz_target", f.loop.rate_Hz}, {"rate_Hz_measured", st.rate_Hz}, {"ticks", st.ticks},
+               {"overruns", st.overruns}, {"faults", st.faults}, {"realtime_priority", st.realtime_priority},
+               {"compute_us", percentiles_json(st.compute_us)},
+               {"jitter_us", percentiles_json(st.jitter_us)}};
+  if (f.offline) r["loop"]["ticks"] = trace.size();
+  write_text_atomic(f.report, r.dump(2) + "\n");
+  std::cout << "haptics (" << mode_name(f.loop.mode) << ", " << path.name << "): tool–path error RMS "
+            << std::sqrt(se / n) << " mm, max " << emax << " mm (device " << std::sqrt(dse / n) << " mm); force peak "
+            << fmax << " N, mean " << fsum / n << " N\n";
+  if (!f.offline)
+    std::cout << "loop: " << st.rate_Hz << " Hz, compute p50/p99/p99.9 " << st.compute_us.p50 << "/" << st.compute_us.p99
+              << "/" << st.compute_us.p999 << " µs, jitter p50/p99/p99.9 " << st.jitter_us.p50 << "/" << st.jitter_us.p99
+              << "/" << st.jitter_us.p999 << " µs\n";
+  std::cout << "wrote " << f.report << "\n";
+  return 0;
+}
+
+}  // namespace
+
+std::vector<Command> haptics_commands(CLI::App& app) {
+  std::vector<Command> commands;
+
+  auto g = std::make_shared<GuideFlags>();
+  auto* guide = app.add_subcommand(
+      "guide",
+      "Guidance paths of a run's output directory (thesis §5.2): the trachea centreline (reaching both\n"
+      "lumen ends, 1 mm spacing), the incision line on the anterior trachea wall over a ring segment,\n"
+      "and the gallbladder dissection line where the wall meets the liver bed; or a recorded path\n"
+      "(CSV x,y,z or JSON, LPS mm). Writes OUT_DIR/paths/<name>.json and .vtp.");
+  guide->add_option("out_dir", g->out, "output directory of `organsmith run`")->required();
+  guide->add_option("--path", g->path,
+                    "one path: trachea_centerline, trachea_incision, gallbladder_dissection, or a CSV/JSON file");
+  guide->add_option("--first-ring", g->options.incision.first_ring, "incision: first ring from the cranial end (default 3)")
+      ->check(CLI::Range(1, 100));
+  guide->add_option("--ring-count", g->options.incision.ring_count, "incision: rings spanned (default 4)")->check(CLI::Range(1, 100));
+  guide->add_option("--ring-pitch-mm", g->options.incision.ring_pitch_mm, "incision: ring period in mm (default 6)")
+      ->check(CLI::PositiveNumber);
+  guide->add_option("--bed-distance-mm", g->options.dissection.bed_distance_mm,
+                    "dissection: liver within this distance marks the bed, mm (default 2)")
+      ->check(CLI::PositiveNumber);
+  commands.push_back({guide, [=] { return run_guide(*g); }});
+
+  auto h = std::make_shared<HapticsFlags>();
+  auto* haptics = app.add_subcommand(
+      "haptics",
+      "Replays a trajectory (CSV t_s,x,y,z; seconds, LPS mm) through the 1 kHz force loop: guidance\n"
+      "toward the path (staged potential field, thesis 5.2.3–5.2.8), reaction from the organ surfaces\n"
+      "and their calibrated laws, mixed F = w1 G + w2 R by mode. Writes REPORT.json: path-following\n"
+      "error, time in each ξ band, peak and mean forces, loop rate, compute time and jitter.");
+  haptics->add_option("out_dir", h->out, "output directory of `organsmith run`")->required();
+  haptics->add_option("--trajectory", h->trajectory, "CSV with header t_s,x,y,z")->required();
+  haptics->add_option("--mode", h->mode, "guidance (w1=1), mixed (0.5/0.5, default) or reaction (w2=1)")
+      ->check(CLI::IsMember({"guidance", "mixed", "reaction"}));
+  haptics->add_option("--out", h->report, "report JSON")->required();
+  haptics->add_option("--path", h->path, "guidance path name in OUT_DIR/paths (default trachea_incision) or a CSV/JSON file");
+  haptics->add_option("--tool-radius-mm", h->contact.tool_radius_mm, "tool tip sphere radius, mm (default 2)")
+      ->check(CLI::PositiveNumber);
+  haptics->add_option("--reference-length-mm", h->contact.reference_length_mm,
+                      "strain = penetration / this length, mm (default 5)")
+      ->check(CLI::PositiveNumber);
+  haptics->add_option("--force-limit-n", h->loop.force_limit_N, "force clamp, N (default 3)")->check(CLI::PositiveNumber);
+  haptics->add_option("--rate-hz", h->loop.rate_Hz, "loop rate, Hz (default 1000)")->check(CLI::Range(1.0, 100000.0));
+  haptics->add_option("--xi", h->xi, "the three ξ stiffnesses, N/mm (default 0.3,0.6,0.9)")->delimiter(',');
+  haptics->add_option("--bands", h->bands, "the two band edges, mm (default 2,5)")->delimiter(',');
+  haptics->add_option("--hand-stiffness", h->loop.hand_stiffness_N_per_mm,
+                      "stiffness of the simulated hand holding the tool, N/mm (default 0.5)")
+      ->check(CLI::NonNegativeNumber);
+  haptics->add_flag("--offline", h->offline,
+                    "compute the ticks back to back at their nominal times instead of in real time (deterministic; no timing figures)");
+  commands.push_back({haptics, [=] { return run_haptics(*h); }});
+  return commands;
+}
 
 }  // namespace organsmith

@@ -4,12 +4,14 @@
 #include "core/file_io.h"
 #include "core/sha256.h"
 #include "organsmith_version.h"  // generated at build time: version and git commit
+#include "pipeline/guide_stage.h"
 #include "pipeline/ingest.h"
 #include "pipeline/phantom.h"
 #include "pipeline/image_io.h"
 #include "pipeline/phantom_files.h"
 #include "meshing/export.h"
 #include "meshing/mesh.h"
+#include "physics/contact.h"
 #include "physics/presets.h"
 #include "pipeline/output_scene.h"
 #include "viewer/snapshot.h"
@@ -175,11 +177,18 @@ class Runner {
                [&](const fs::path& staging) {
                  write_text_atomic(staging / "materials.json", materials_json().dump(2) + "\n");
                }});
+      // guide: guidance paths (trachea centreline and incision, gallbladder dissection) in paths/.
+      execute({"guide", fingerprint("guide", outputs_digest("phantom") + outputs_digest("segment") + outputs_digest("mesh")),
+               [&](const fs::path& staging) {
+                 for (const auto& f : write_guidance_paths(out_, staging / "paths", GuideStageOptions{}))
+                   spdlog::info("guide: paths/{}", f);
+               }});
     }
     const nlohmann::json snap_opts = case_.other_stages.value("snapshot", nlohmann::json::object());
     execute({"snapshot",
              fingerprint("snapshot", snap_opts.dump() + outputs_digest("ingest") + outputs_digest("segment") +
-                                         outputs_digest("mesh") + outputs_digest("attach")),
+                                         outputs_digest("mesh") + outputs_digest("attach") +
+                                         outputs_digest("guide")),
              [&](const fs::path& staging) { write_snapshots(staging); }});
   }
 
@@ -495,7 +504,7 @@ void write_directory_atomically(const fs::path& final_dir, const std::function<v
 void write_text_atomic(const fs::path& path, const std::string& text) { write_file_atomic(path, text); }
 
 const std::vector<std::string>& stage_names() {
-  static const std::vector<std::string> names = {"phantom", "ingest", "segment", "mesh", "attach", "snapshot"};
+  static const std::vector<std::string> names = {"phantom", "ingest", "segment", "mesh", "attach", "guide", "snapshot"};
   return names;
 }
 
@@ -507,6 +516,85 @@ RunSummary run_case(const CaseFile& c, const RunOptions& options, Progress& prog
     throw UsageError("unknown stage '" + options.until + "'", "stages: " + list);
   }
   return Runner(c, options, progress).run();
+}
+
+// ---- guide stage (guidance paths; also `organsmith guide`) -----------------------------------------
+
+const std::vector<std::string>& builtin_path_names() {
+  static const std::vector<std::string> names = {"trachea_centerline", "trachea_incision", "gallbladder_dissection"};
+  return names;
+}
+
+std::vector<std::string> write_guidance_paths(const fs::path& out_dir, const fs::path& dest_dir,
+                                              const GuideStageOptions& options) {
+  for (const auto& n : options.only)
+    if (std::find(builtin_path_names().begin(), builtin_path_names().end(), n) == builtin_path_names().end())
+      throw UsageError("unknown path '" + n + "'", "paths: trachea_centerline, trachea_incision, gallbladder_dissection");
+  const fs::path truth_file = out_dir / "phantom" / "ground_truth.nii.gz";
+  fs::path labels_file = out_dir / "labels.nii.gz";
+  if (!fs::exists(labels_file) && fs::exists(truth_file)) labels_file = truth_file;
+  if (!fs::exists(labels_file))
+    throw InputError(ExitCode::input_not_found, "no label map in the output directory", out_dir / "labels.nii.gz",
+                     "run `organsmith run` (or `organsmith segment`) into this directory first");
+  const LabelMap labels = read_label_map(labels_file);
+  auto wanted = [&](const std::string& n, std::uint8_t label) {
+    if (!options.only.empty()) return std::find(options.only.begin(), options.only.end(), n) != options.only.end();
+    return labels.count(label) > 0;
+  };
+  auto surface = [&](const std::string& organ, const std::string& name) {
+    const fs::path f = out_dir / "meshes" / organ / (name + ".stl");
+    if (!fs::exists(f))
+      throw InputError(ExitCode::input_not_found, "missing organ surface " + name + ".stl", f,
+                       "run the mesh stage (`organsmith run`, or `organsmith mesh … --out " + (out_dir / "meshes").string() +
+                           "`) first");
+    return read_stl(f);
+  };
+  fs::create_directories(dest_dir);
+  std::vector<std::string> written;
+  auto emit = [&](const Polyline& line, const std::vector<std::pair<std::string, double>>& props) {
+    write_text_atomic(dest_dir / (line.name + ".json"), physics::path_json(line, props));
+    write_text_atomic(dest_dir / (line.name + ".vtp"), physics::path_vtp(line));
+    written.push_back(line.name + ".json");
+    written.push_back(line.name + ".vtp");
+  };
+  const bool want_centerline = wanted("trachea_centerline", 2), want_incision = wanted("trachea_incision", 2);
+  if (want_centerline || want_incision) {
+    const physics::Centerline cl = physics::trachea_centerline(labels, options.centerline);
+    if (want_centerline)
+      emit(cl.line, {{"cranial_extension_mm", cl.end_extension_mm[0]},
+                     {"caudal_extension_mm", cl.end_extension_mm[1]},
+                     {"spacing_mm", options.centerline.spacing_mm}});
+    if (want_incision) {
+      const physics::SurfaceIndex wall({surface("trachea", "trachea_wall")});
+      const physics::IncisionPath inc = physics::trachea_incision_path(cl, wall, options.incision);
+      emit(inc.line, {{"length_mm", inc.length_mm},
+                      {"first_ring", double(inc.first_ring)},
+                      {"last_ring", double(inc.last_ring)},
+                      {"ring_pitch_mm", options.incision.ring_pitch_mm},
+                      {"start_along_centerline_mm", inc.start_arc_mm},
+                      {"end_along_centerline_mm", inc.end_arc_mm},
+                      {"max_wall_distance_mm", inc.max_wall_distance_mm}});
+    }
+  }
+  if (wanted("gallbladder_dissection", 1)) {
+    const SurfaceMesh gb = surface("gallbladder", "gallbladder");
+    std::optional<LabelMap> truth;
+    const LabelMap* liver = nullptr;
+    if (labels.count(options.dissection.liver_label) > 0) {
+      liver = &labels;
+    } else if (fs::exists(truth_file)) {
+      truth = read_label_map(truth_file);
+      // The phantom's ground truth is in the same patient frame (LPS mm); its grid may differ.
+      if (truth->count(options.dissection.liver_label) > 0) liver = &*truth;
+    }
+    const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, options.dissection);
+    spdlog::info("guide: gallbladder liver bed from the {}{}", d.bed_source,
+                 liver && liver != &labels ? " of the phantom ground truth" : "");
+    emit(d.line, {{"bed_area_mm2", d.bed_area_mm2},
+                  {"bed_from_liver_label", d.bed_source == "liver label" ? 1.0 : 0.0},
+                  {"max_surface_distance_mm", d.max_surface_distance_mm}});
+  }
+  return written;
 }
 
 }  // namespace organsmith
