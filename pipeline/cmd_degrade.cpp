@@ -1,8 +1,322 @@
-// Placeholder while the command is being written.
+// `organsmith degrade`: strain-energy-driven degradation of the magnesium micro-clip (thesis ch. 6,
+// physics/degradation.h). Simulates the deployed clip under the wound load and writes the Fig. 6.8
+// stages as VTK XML polylines, the mass curve and a summary; with --fit, calibrates τ_D to a
+// mass-remaining series (Table 6.1). Output formats: physics/DEGRADATION.md ("Outputs").
+
+#include "core/errors.h"
+#include "physics/clip.h"
+#include "physics/degradation.h"
 #include "pipeline/commands.h"
+#include "pipeline/runner.h"
+#include "pipeline/terminal_progress.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <sstream>
 
 namespace organsmith {
 
-std::vector<Command> degradation_commands(CLI::App&) { return {}; }
+namespace fs = std::filesystem;
+using namespace organsmith::physics;
+
+namespace {
+
+std::string num(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.10g", v);
+  return buf;
+}
+
+struct DegradeFlags {
+  std::string out, clip, fit;
+  double load_n = 5.0;
+  double tau_d = 241.41;
+  double weeks = 4.0;
+  double dt_days = 0.1;
+  int elements = 0;
+  double max_increase = 0.05;
+  bool print_clip = false;
+};
+
+/// One stage as VTK XML PolyData (ASCII): one line cell per element, clip frame in mm (z = 0).
+std::string stage_vtp(const ClipModel& m, const ClipSnapshot* s, const std::string& title) {
+  const ClipGeometry& g = m.geometry();
+  const int N = g.elements(), P = g.nodes();
+  std::ostringstream x;
+  x << "<?xml version=\"1.0\"?>\n"
+    << "<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
+    << "  <PolyData>\n"
+    << "    <FieldData>\n"
+    << "      <DataArray type=\"Float64\" Name=\"t_days\" NumberOfTuples=\"1\" format=\"ascii\">"
+    << num(s ? s->t_days : 0.0) << "</DataArray>\n"
+    << "      <DataArray type=\"Int32\" Name=\"load_carried\" NumberOfTuples=\"1\" format=\"ascii\">"
+    << (s && s->load_carried ? 1 : 0) << "</DataArray>\n"
+    << "    </FieldData>\n"
+    << "    <Piece NumberOfPoints=\"" << P << "\" NumberOfVerts=\"0\" NumberOfLines=\"" << N
+    << "\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">\n"
+    << "      <Points>\n        <DataArray type=\"Float64\" Name=\"points_mm\" NumberOfComponents=\"3\" format=\"ascii\">\n";
+  for (int n = 0; n < P; ++n) {
+    const Eigen::Vector2d p = s ? Eigen::Vector2d(s->q.segment<2>(2 * n)) : g.nodes_mm[n];
+    x << "          " << num(p.x()) << ' ' << num(p.y()) << " 0\n";
+  }
+  x << "        </DataArray>\n      </Points>\n      <PointData>\n"
+    << "        <DataArray type=\"Float64\" Name=\"displacement_mm\" NumberOfComponents=\"3\" format=\"ascii\">\n";
+  for (int n = 0; n < P; ++n) {
+    const Eigen::Vector2d u = s ? Eigen::Vector2d(s->q.segment<2>(2 * n) - g.nodes_mm[n]) : Eigen::Vector2d::Zero();
+    x << "          " << num(u.x()) << ' ' << num(u.y()) << " 0\n";
+  }
+  x << "        </DataArray>\n      </PointData>\n      <CellData Scalars=\"d\">\n";
+  auto cell_array = [&](const char* type, const char* name, auto value) {
+    x << "        <DataArray type=\"" << type << "\" Name=\"" << name << "\" format=\"ascii\">\n          ";
+    for (int e = 0; e < N; ++e) x << value(e) << (e + 1 < N ? ((e + 1) % 10 ? " " : "\n          ") : "\n");
+    x << "        </DataArray>\n";
+  };
+  cell_array("Float64", "d", [&](int e) { return num(s ? s->d[e] : 0.0); });
+  cell_array("Float64", "remaining", [&](int e) { return num(s ? 1.0 - s->d[e] : 1.0); });
+  cell_array("Float64", "E_star", [&](int e) { return num(s ? s->energies.density[e] : 0.0); });
+  cell_array("Float64", "E_star_mJ", [&](int e) { return num(s ? s->energies.e_star_mJ[e] : 0.0); });
+  cell_array("Int32", "fractured", [&](int e) { return std::to_string(s && s->fractured[e] ? 1 : 0); });
+  cell_array("Int32", "region", [&](int e) { return std::to_string(static_cast<int>(g.region[e])); });
+  cell_array("Int32", "element_id", [&](int e) { return std::to_string(e); });
+  x << "      </CellData>\n      <Lines>\n"
+    << "        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n";
+  for (int e = 0; e < N; ++e) x << "          " << e << ' ' << e + 1 << "\n";
+  x << "        </DataArray>\n        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n";
+  for (int e = 0; e < N; ++e) x << "          " << 2 * (e + 1) << "\n";
+  x << "        </DataArray>\n      </Lines>\n    </Piece>\n  </PolyData>\n"
+    << "  <!-- " << title << " -->\n</VTKFile>\n";
+  return x.str();
+}
+
+void write_text(const fs::path& p, const std::string& text) {
+  std::ofstream f(p, std::ios::binary);
+  f << text;
+  if (!f) throw OutputError("cannot write " + p.filename().string(), p);
+}
+
+ClipPreset load_preset(const DegradeFlags& f) {
+  return f.clip.empty() ? builtin_clip_preset() : read_clip_preset(f.clip);
+}
+
+nlohmann::json clip_json(const ClipModel& m) {
+  const ClipPreset& p = m.preset();
+  return {{"name", p.name},
+          {"source", p.source},
+          {"preset", p.file.string()},
+          {"elements", m.geometry().elements()},
+          {"length_mm", m.geometry().total_length_mm()},
+          {"thickness_mm", p.thickness_mm},
+          {"width_mm", p.width_mm},
+          {"youngs_modulus_MPa", p.youngs_modulus_MPa},
+          {"poisson_ratio", p.poisson_ratio},
+          {"yield_strength_MPa", {p.yield_min_MPa, p.yield_max_MPa}},
+          {"crown_radius_mm", p.crown_radius_mm},
+          {"leg_length_mm", p.leg_length_mm},
+          {"crown_height_mm", p.crown_height_mm},
+          {"tissue_material", p.tissue_material},
+          {"baseline_rate_per_day", p.baseline_rate_per_day},
+          {"fracture_threshold", p.fracture_threshold},
+          {"regions", {"crown", "left_leg", "left_contact", "right_leg", "right_contact"}}};
+}
+
+int run_print_clip() {
+  std::cout << builtin_clip_preset_text();
+  return 0;
+}
+
+int run_simulate(const DegradeFlags& f) {
+  if (!(f.tau_d > 0)) throw UsageError("--tau-d must be positive (got " + num(f.tau_d) + ")",
+                                       "τ_D is in week·(kJ/m³)^½; Table 6.1 gives 241.41 and 245.31");
+  if (!(f.load_n >= 0)) throw UsageError("--load-n must be ≥ 0 N (got " + num(f.load_n) + ")");
+  if (!(f.weeks > 0) || f.weeks > 520) throw UsageError("--weeks must lie in (0, 520] (got " + num(f.weeks) + ")");
+  if (!(f.dt_days > 0) || f.dt_days > 7) throw UsageError("--dt-days must lie in (0, 7] (got " + num(f.dt_days) + ")");
+  const ClipModel model(load_preset(f), f.elements);
+  DegradationOptions o;
+  o.tau_d = f.tau_d;
+  o.load_N = f.load_n;
+  o.end_days = 7.0 * f.weeks;
+  o.dt_days = f.dt_days;
+  std::vector<double> stages;
+  for (double s : o.stage_days)
+    if (s <= o.end_days + 1e-9) stages.push_back(s);
+  o.stage_days = stages;
+  TerminalProgress progress;
+  const DegradationResult r = simulate_degradation(model, o, &progress);
+  progress.finish();
+  const ClipGeometry& g = model.geometry();
+  const ClipPreset& p = model.preset();
+
+  nlohmann::json j;
+  j["tool_version"] = tool_version();
+  j["clip"] = clip_json(model);
+  j["load_n"] = f.load_n;
+  j["tau_d"] = f.tau_d;
+  j["tau_d_unit"] = kTauUnitName;
+  j["energy_unit"] = kEnergyDensityUnitName;
+  j["weeks"] = f.weeks;
+  j["dt_days"] = f.dt_days;
+  j["frame"] = "clip frame, mm: x across the wound (incision at x = 0), y out of the tissue (surface y = 0), z = 0";
+  nlohmann::json dep = nlohmann::json::array();
+  for (const auto& rec : r.deployment_steps)
+    dep.push_back({{"iterations", rec.iterations}, {"converged", rec.converged},
+                   {"final_residual_N", rec.final_residual_N}, {"non_pd_shifts", rec.non_pd_shifts},
+                   {"energy_mJ", rec.energy_mJ}});
+  j["deployment"] = {{"load_steps", dep},
+                     {"max_displacement_mm", r.max_displacement_mm},
+                     {"max_bending_stress_MPa", r.max_bending_stress_MPa},
+                     {"exceeds_yield", r.max_bending_stress_MPa > p.yield_min_MPa},
+                     {"potential_mJ", r.initial.energies.total_potential_mJ}};
+  // Where the initial energy peaks, per region (Fig. 6.3).
+  nlohmann::json peaks = nlohmann::json::object();
+  for (int reg = 0; reg < 5; ++reg) {
+    int best = -1;
+    for (int e = 0; e < g.elements(); ++e)
+      if (static_cast<int>(g.region[e]) == reg && (best < 0 || r.initial.energies.density[e] > r.initial.energies.density[best]))
+        best = e;
+    if (best >= 0) {
+      const Eigen::Vector2d c = (g.nodes_mm[best] + g.nodes_mm[best + 1]) / 2;
+      peaks[region_name(static_cast<ClipRegion>(reg))] = {
+          {"element", best}, {"E_star", r.initial.energies.density[best]}, {"x_mm", c.x()}, {"y_mm", c.y()}};
+    }
+  }
+  j["initial_energy_peaks"] = peaks;
+  nlohmann::json st = nlohmann::json::array();
+  st.push_back({{"file", "stage_0_0.0w.vtp"}, {"t_days", 0.0}, {"weeks", 0.0}, {"previous", nullptr}});
+  for (std::size_t k = 0; k < r.stages.size(); ++k) {
+    char name[64];
+    std::snprintf(name, sizeof name, "stage_%zu_%.1fw.vtp", k + 1, r.stages[k].t_days / 7.0);
+    st.push_back({{"file", name}, {"t_days", r.stages[k].t_days}, {"weeks", r.stages[k].t_days / 7.0},
+                  {"previous", st.back()["file"]}});
+  }
+  j["original"] = "original.vtp";
+  j["stages"] = st;
+  const double mass0_mg = p.density_g_per_cm3 * p.area_mm2() * g.total_length_mm();
+  j["initial_mass_mg"] = mass0_mg;
+  j["final_mass_fraction"] = r.steps.back().mass_fraction;
+  j["load_released_day"] = r.load_released_day < 0 ? nlohmann::json(nullptr) : nlohmann::json(r.load_released_day);
+  nlohmann::json frac = nlohmann::json::array();
+  for (int e = 0; e < g.elements(); ++e)
+    if (r.fracture_day[e] >= 0)
+      frac.push_back({{"element", e}, {"region", region_name(g.region[e])}, {"t_days", r.fracture_day[e]}});
+  j["fractures"] = frac;
+  j["total_iterations"] = r.total_iterations;
+  j["all_converged"] = r.all_converged;
+
+  std::ostringstream csv;
+  csv << "t_days,mass_fraction,mass_mg,fractured_elements,load_carried,stored_energy_mJ,potential_mJ,iterations,residual_N\n";
+  for (const auto& s : r.steps)
+    csv << num(s.t_days) << ',' << num(s.mass_fraction) << ',' << num(s.mass_fraction * mass0_mg) << ',' << s.fractured
+        << ',' << (s.load_carried ? 1 : 0) << ',' << num(s.stored_mJ) << ',' << num(s.potential_mJ) << ','
+        << s.iterations << ',' << num(s.residual_N) << '\n';
+
+  const fs::path out = fs::absolute(f.out);
+  write_directory_atomically(out, [&](const fs::path& dir) {
+    write_text(dir / "original.vtp", stage_vtp(model, nullptr, "original (stress-free) shape"));
+    write_text(dir / "stage_0_0.0w.vtp", stage_vtp(model, &r.initial, "deployed, t = 0"));
+    for (std::size_t k = 0; k < r.stages.size(); ++k)
+      write_text(dir / st[k + 1]["file"].get<std::string>(),
+                 stage_vtp(model, &r.stages[k], "t = " + num(r.stages[k].t_days) + " days"));
+    write_text(dir / "mass.csv", csv.str());
+    write_text(dir / "summary.json", j.dump(2) + "\n");
+  });
+  std::cout << "clip " << p.name << " (" << g.elements() << " elements) under " << num(f.load_n) << " N, τ_D "
+            << num(f.tau_d) << " " << kTauUnitName << "\n"
+            << "  deployment: max displacement " << num(r.max_displacement_mm) << " mm, max bending stress "
+            << num(r.max_bending_stress_MPa) << " MPa (yield " << num(p.yield_min_MPa) << "–" << num(p.yield_max_MPa)
+            << " MPa; the model is elastic)\n"
+            << "  mass remaining after " << num(f.weeks) << " weeks: " << num(100 * r.steps.back().mass_fraction) << " %\n";
+  if (r.load_released_day >= 0)
+    std::cout << "  the clip stopped holding the wound on day " << num(r.load_released_day) << " (a leg broke)\n";
+  if (!r.all_converged) std::cout << "  warning: some minimisations did not reach the force tolerance (see mass.csv residual_N)\n";
+  std::cout << "wrote " << out.string() << "\n";
+  return 0;
+}
+
+int run_fit(const DegradeFlags& f) {
+  if (!(f.load_n >= 0)) throw UsageError("--load-n must be ≥ 0 N (got " + num(f.load_n) + ")");
+  if (!(f.dt_days > 0) || f.dt_days > 7) throw UsageError("--dt-days must lie in (0, 7] (got " + num(f.dt_days) + ")");
+  const MassSeries data = read_mass_csv(f.fit, f.max_increase);
+  const ClipModel model(load_preset(f), f.elements);
+  DegradationOptions o;
+  o.load_N = f.load_n;
+  o.dt_days = f.dt_days;
+  TerminalProgress progress;
+  const TauFit fit = fit_tau_d(model, o, data, {}, &progress);
+  progress.finish();
+  DegradationOptions best = o;
+  best.tau_d = fit.tau_d;
+  best.keep_stages = false;
+  best.end_days = std::ceil(data.t_days.back() / o.dt_days - 1e-9) * o.dt_days;
+  const DegradationResult curve = simulate_degradation(model, best, nullptr);
+
+  nlohmann::json j;
+  j["tool_version"] = tool_version();
+  j["data"] = fs::absolute(f.fit).string();
+  j["points"] = data.t_days.size();
+  j["clip"] = clip_json(model);
+  j["load_n"] = f.load_n;
+  j["tau_d"] = fit.tau_d;
+  j["tau_d_unit"] = kTauUnitName;
+  j["r2"] = fit.r2;
+  j["rmse"] = fit.rmse;
+  j["sse"] = fit.sse;
+  j["evaluations"] = fit.evaluations;
+  j["at_search_bound"] = fit.at_bound;
+  j["dt_days"] = f.dt_days;
+  std::ostringstream csv, curve_csv;
+  csv << "t_days,mass_fraction,model_mass_fraction,residual\n";
+  for (std::size_t i = 0; i < data.t_days.size(); ++i)
+    csv << num(data.t_days[i]) << ',' << num(data.mass_fraction[i]) << ',' << num(fit.predicted[i]) << ','
+        << num(fit.predicted[i] - data.mass_fraction[i]) << '\n';
+  curve_csv << "t_days,mass_fraction\n";
+  for (const auto& s : curve.steps) curve_csv << num(s.t_days) << ',' << num(s.mass_fraction) << '\n';
+  const fs::path out = fs::absolute(f.out);
+  write_directory_atomically(out, [&](const fs::path& dir) {
+    write_text(dir / "fit.json", j.dump(2) + "\n");
+    write_text(dir / "fit.csv", csv.str());
+    write_text(dir / "model_mass.csv", curve_csv.str());
+  });
+  std::cout << "τ_D = " << num(fit.tau_d) << " " << kTauUnitName << " from " << data.t_days.size() << " points: R² "
+            << num(fit.r2) << ", RMSE " << num(fit.rmse) << (fit.at_bound ? " (at the search bound)" : "") << "\n"
+            << "wrote " << out.string() << "\n";
+  return 0;
+}
+
+}  // namespace
+
+std::vector<Command> degradation_commands(CLI::App& app) {
+  auto f = std::make_shared<DegradeFlags>();
+  auto* cmd = app.add_subcommand(
+      "degrade",
+      "Strain-energy-driven degradation of the magnesium micro-clip (thesis ch. 6). Deploys the clip\n"
+      "(data/clips.toml or --clip) on a wound under --load-n, integrates ḋ = (1 − d)(k0 + √E*/τ_D) with the\n"
+      "energy re-minimised every step, and writes DIR/original.vtp, DIR/stage_*.vtp (t = 0 and 0.5 … 2.5\n"
+      "weeks; cell data d and E* per element), DIR/mass.csv and DIR/summary.json.\n"
+      "With --fit MASS.csv (columns t_days, mass_fraction) calibrates τ_D instead: DIR/fit.json, fit.csv,\n"
+      "model_mass.csv.");
+  cmd->add_option("--out", f->out, "output directory (replaced as a whole; required unless --print-clip)");
+  cmd->add_option("--clip", f->clip, "clip preset TOML (default: the embedded data/clips.toml; see --print-clip)");
+  cmd->add_option("--load-n", f->load_n, "wound tension held by the clip, N (default 5: the thesis' loaded group)");
+  cmd->add_option("--tau-d", f->tau_d, "τ_D of 6.16 in week·(kJ/m³)^½ (default 241.41, Table 6.1 group 1)");
+  cmd->add_option("--weeks", f->weeks, "simulated time in weeks (default 4)");
+  cmd->add_option("--dt-days", f->dt_days, "time step in days (default 0.1)");
+  cmd->add_option("--elements", f->elements, "beam elements (default: the preset's)")->check(CLI::Range(8, 100000));
+  cmd->add_option("--fit", f->fit, "calibrate τ_D to this mass-remaining CSV instead of simulating");
+  cmd->add_option("--max-increase", f->max_increase,
+                  "--fit: largest rise of mass_fraction over an earlier row accepted as weighing noise (default 0.05)")
+      ->check(CLI::Range(0.0, 1.0));
+  cmd->add_flag("--print-clip", f->print_clip, "print the embedded clip preset (a starting point for --clip) and exit");
+  return {{cmd, [f] {
+             if (f->print_clip) return run_print_clip();
+             if (f->out.empty()) throw UsageError("degrade needs --out DIR", "see `organsmith degrade --help`");
+             return f->fit.empty() ? run_simulate(*f) : run_fit(*f);
+           }}};
+}
 
 }  // namespace organsmith
