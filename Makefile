@@ -27,8 +27,11 @@ demo: build
 test: build
 	@cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS)
 
+# Every benchmark in turn (each prints its figures and ratios; a failed target does not stop the rest).
+BENCHES = bench_ingest segmentation/bench_gvf segmentation/bench_segment meshing/bench_meshing \
+          physics/bench_physics physics/bench_haptics physics/bench_degradation viewer/bench_viewer
 bench: build
-	@$(BUILD_DIR)/bench/bench_ingest
+	@for b in $(BENCHES); do echo "== $$b"; $(BUILD_DIR)/bench/$$b || echo "($$b: target not met)"; done
 
 clean:
 	@rm -rf $(BUILD_DIR) $(BUILD_DIR).configure.log

@@ -52,7 +52,126 @@ Face key(std::int32_t a, std::int32_t b, std::int32_t c) {
 }
 const int kFaces[4][3] = {{1, 2, 3}, {0, 3, 2}, {0, 1, 3}, {0, 2, 1}};
 
+double signed_volume(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
+                     const Eigen::Vector3d& d) {
+  return (b - a).dot((c - a).cross(d - a)) / 6.0;
+}
+
+using Tet = std::array<std::int32_t, 4>;
+
 }  // namespace
+
+int flip_tets(TetMesh& m, double min_dih, double max_re) {
+  const auto& P = m.vertices_lps_mm;
+  auto vol_ok = [&](const Tet& t) {
+    const Eigen::Vector3d &a = P[t[0]], &b = P[t[1]], &c = P[t[2]], &d = P[t[3]];
+    double lmax = 0;
+    for (const auto* x : {&a, &b, &c, &d})
+      for (const auto* y : {&a, &b, &c, &d}) lmax = std::max(lmax, (*x - *y).norm());
+    return signed_volume(a, b, c, d) > 1e-9 * lmax * lmax * lmax;
+  };
+  auto score_of = [&](const Tet& t) {
+    const Eigen::Vector3d p[4] = {P[t[0]], P[t[1]], P[t[2]], P[t[3]]};
+    return score(p, min_dih, max_re);
+  };
+
+  std::vector<Tet> tets = m.tets;
+  std::vector<std::int32_t> regions = m.region_ids;
+  std::vector<char> alive(tets.size(), 1);
+  std::map<Face, std::vector<std::size_t>> face_tets;
+  std::map<std::array<std::int32_t, 2>, std::vector<std::size_t>> edge_tets;
+  auto edge_key = [](std::int32_t a, std::int32_t b) { return std::array<std::int32_t, 2>{std::min(a, b), std::max(a, b)}; };
+  auto add = [&](std::size_t t) {
+    for (const auto& f : kFaces) face_tets[key(tets[t][f[0]], tets[t][f[1]], tets[t][f[2]])].push_back(t);
+    for (int i = 0; i < 4; ++i)
+      for (int j = i + 1; j < 4; ++j) edge_tets[edge_key(tets[t][i], tets[t][j])].push_back(t);
+  };
+  auto live = [&](std::vector<std::size_t> v) {
+    v.erase(std::remove_if(v.begin(), v.end(), [&](std::size_t t) { return !alive[t]; }), v.end());
+    return v;
+  };
+  for (std::size_t t = 0; t < tets.size(); ++t) add(t);
+
+  int flips = 0;
+  const std::size_t n0 = tets.size();
+  for (std::size_t t = 0; t < n0; ++t) {
+    if (!alive[t] || score_of(tets[t]) >= 1.0) continue;
+    double best_gain = 0;
+    std::vector<std::size_t> best_old;
+    std::vector<Tet> best_new;
+    const double own = score_of(tets[t]);
+
+    // 2-3 across each face.
+    for (const auto& f : kFaces) {
+      const Face k = key(tets[t][f[0]], tets[t][f[1]], tets[t][f[2]]);
+      const auto around = live(face_tets[k]);
+      if (around.size() != 2) continue;
+      const std::size_t o = around[0] == t ? around[1] : around[0];
+      if (regions[o] != regions[t]) continue;
+      std::int32_t e = -1;
+      for (auto v : tets[o])
+        if (v != k[0] && v != k[1] && v != k[2]) e = v;
+      const Tet& T = tets[t];
+      std::vector<Tet> made;
+      for (int i = 0; i < 4; ++i) {
+        if (T[i] != k[0] && T[i] != k[1] && T[i] != k[2]) continue;
+        Tet n = T;
+        n[i] = e;  // replace one vertex of the shared face by the far vertex of the neighbour
+        made.push_back(n);
+      }
+      if (made.size() != 3 || !std::all_of(made.begin(), made.end(), vol_ok)) continue;
+      double worst_new = 1e300;
+      for (const auto& n : made) worst_new = std::min(worst_new, score_of(n));
+      const double gain = worst_new - std::min(own, score_of(tets[o]));
+      if (gain > best_gain + 1e-9) best_gain = gain, best_old = {t, o}, best_new = made;
+    }
+
+    // 3-2 around each edge.
+    for (int i = 0; i < 4; ++i)
+      for (int j = i + 1; j < 4; ++j) {
+        const std::int32_t u = tets[t][i], v = tets[t][j];
+        const auto ring = live(edge_tets[edge_key(u, v)]);
+        if (ring.size() != 3) continue;
+        bool same_region = true;
+        std::vector<std::int32_t> others;
+        for (auto r : ring) {
+          same_region &= regions[r] == regions[t];
+          for (auto w : tets[r])
+            if (w != u && w != v && std::find(others.begin(), others.end(), w) == others.end()) others.push_back(w);
+        }
+        // Exactly three other vertices: the ring closes around the edge (an interior edge).
+        if (!same_region || others.size() != 3) continue;
+        // Every face of the ring that contains the edge must be shared by two ring tets.
+        bool closed = true;
+        for (auto w : others) closed &= live(face_tets[key(u, v, w)]).size() == 2;
+        if (!closed) continue;
+        Tet a{others[0], others[1], others[2], u}, b{others[0], others[2], others[1], v};
+        if (signed_volume(P[a[0]], P[a[1]], P[a[2]], P[a[3]]) < 0) std::swap(a[1], a[2]), std::swap(b[1], b[2]);
+        if (!vol_ok(a) || !vol_ok(b)) continue;
+        const double worst_new = std::min(score_of(a), score_of(b));
+        double worst_old = 1e300;
+        for (auto r : ring) worst_old = std::min(worst_old, score_of(tets[r]));
+        const double gain = worst_new - worst_old;
+        if (gain > best_gain + 1e-9) best_gain = gain, best_old = ring, best_new = {a, b};
+      }
+
+    if (best_new.empty()) continue;
+    for (auto o : best_old) alive[o] = 0;
+    for (const auto& n : best_new) {
+      tets.push_back(n);
+      regions.push_back(regions[t]);
+      alive.push_back(1);
+      add(tets.size() - 1);
+    }
+    ++flips;
+  }
+
+  m.tets.clear();
+  m.region_ids.clear();
+  for (std::size_t t = 0; t < tets.size(); ++t)
+    if (alive[t]) m.tets.push_back(tets[t]), m.region_ids.push_back(regions[t]);
+  return flips;
+}
 
 TetImproveStats improve_tets(TetMesh& m, double min_dih, double max_re) {
   TetImproveStats stats;
@@ -66,63 +185,74 @@ TetImproveStats improve_tets(TetMesh& m, double min_dih, double max_re) {
   for (const auto& [f, ts] : face_tets)
     if (ts.size() == 1 || (ts.size() == 2 && m.region_ids[ts[0]] != m.region_ids[ts[1]]))
       for (auto v : f) fixed[v] = 1;
-  std::vector<std::vector<std::size_t>> star(nv);
-  for (std::size_t t = 0; t < m.tets.size(); ++t)
-    for (auto v : m.tets[t]) star[v].push_back(t);
+  // Vertex relocation (the stars change after flips, so they are rebuilt each time).
+  auto smooth = [&] {
+    std::vector<std::vector<std::size_t>> star(nv);
+    for (std::size_t t = 0; t < m.tets.size(); ++t)
+      for (auto v : m.tets[t]) star[v].push_back(t);
 
-  auto star_score = [&](std::int32_t v) {
-    double s = 1e300;
-    for (auto t : star[v]) s = std::min(s, tet_score(m, t, min_dih, max_re));
-    return s;
+    auto star_score = [&](std::int32_t v) {
+      double s = 1e300;
+      for (auto t : star[v]) s = std::min(s, tet_score(m, t, min_dih, max_re));
+      return s;
+    };
+
+    for (int pass = 0; pass < 6; ++pass) {
+      std::vector<std::int32_t> candidates;
+      for (std::size_t t = 0; t < m.tets.size(); ++t)
+        if (tet_score(m, t, min_dih, max_re) < 1.0)
+          for (auto v : m.tets[t])
+            if (!fixed[v]) candidates.push_back(v);
+      std::sort(candidates.begin(), candidates.end());
+      candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
+      if (candidates.empty()) break;
+      int moved = 0;
+      for (auto v : candidates) {
+        Eigen::Vector3d& p = m.vertices_lps_mm[v];
+        const Eigen::Vector3d start = p;
+        double best = star_score(v);
+        Eigen::Vector3d best_p = p;
+        // Star centroid (Laplacian) and partial steps towards it.
+        Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+        double mean_edge = 0;
+        int count = 0;
+        for (auto t : star[v])
+          for (auto w : m.tets[t])
+            if (w != v) {
+              centroid += m.vertices_lps_mm[w];
+              mean_edge += (m.vertices_lps_mm[w] - start).norm();
+              ++count;
+            }
+        centroid /= count;
+        mean_edge /= count;
+        std::vector<Eigen::Vector3d> tries;
+        for (double s : {1.0, 0.5, 0.25}) tries.push_back(start + s * (centroid - start));
+        for (double step : {0.15, 0.05})
+          for (int a = 0; a < 3; ++a)
+            for (int sgn : {-1, 1}) {
+              Eigen::Vector3d q = start;
+              q[a] += sgn * step * mean_edge;
+              tries.push_back(q);
+            }
+        for (const auto& q : tries) {
+          p = q;
+          const double s = star_score(v);
+          if (s > best + 1e-9) best = s, best_p = q;
+        }
+        p = best_p;
+        if (best_p != start) ++moved;
+      }
+      stats.moved_vertices += moved;
+      if (moved == 0) break;
+    }
   };
 
-  for (int pass = 0; pass < 6; ++pass) {
-    std::vector<std::int32_t> candidates;
-    for (std::size_t t = 0; t < m.tets.size(); ++t)
-      if (tet_score(m, t, min_dih, max_re) < 1.0)
-        for (auto v : m.tets[t])
-          if (!fixed[v]) candidates.push_back(v);
-    std::sort(candidates.begin(), candidates.end());
-    candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
-    if (candidates.empty()) break;
-    int moved = 0;
-    for (auto v : candidates) {
-      Eigen::Vector3d& p = m.vertices_lps_mm[v];
-      const Eigen::Vector3d start = p;
-      double best = star_score(v);
-      Eigen::Vector3d best_p = p;
-      // Star centroid (Laplacian) and partial steps towards it.
-      Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-      double mean_edge = 0;
-      int count = 0;
-      for (auto t : star[v])
-        for (auto w : m.tets[t])
-          if (w != v) {
-            centroid += m.vertices_lps_mm[w];
-            mean_edge += (m.vertices_lps_mm[w] - start).norm();
-            ++count;
-          }
-      centroid /= count;
-      mean_edge /= count;
-      std::vector<Eigen::Vector3d> tries;
-      for (double s : {1.0, 0.5, 0.25}) tries.push_back(start + s * (centroid - start));
-      for (double step : {0.15, 0.05})
-        for (int a = 0; a < 3; ++a)
-          for (int sgn : {-1, 1}) {
-            Eigen::Vector3d q = start;
-            q[a] += sgn * step * mean_edge;
-            tries.push_back(q);
-          }
-      for (const auto& q : tries) {
-        p = q;
-        const double s = star_score(v);
-        if (s > best + 1e-9) best = s, best_p = q;
-      }
-      p = best_p;
-      if (best_p != start) ++moved;
-    }
-    stats.moved_vertices += moved;
-    if (moved == 0) break;
+  smooth();
+  for (int round = 0; round < 4; ++round) {
+    const int flips = flip_tets(m, min_dih, max_re);
+    stats.flips += flips;
+    if (flips == 0) break;
+    smooth();
   }
 
   // Peel failing tets lying on the outer boundary with two or more of their faces.
