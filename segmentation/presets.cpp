@@ -72,6 +72,14 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get_range(*t, organ, "edge_window_hu", p.edge_window_lo_hu, p.edge_window_hi_hu);
     get(*t, organ, "edge_sigma_mm", p.edge_sigma_mm);
     get(*t, organ, "edge_stop", p.edge_stop);
+    get(*t, organ, "neck_ratio", p.neck_ratio);
+    get(*t, organ, "neck_depth_mm", p.neck_depth_mm);
+    get(*t, organ, "seat_band_mm", p.seat_band_mm);
+    get(*t, organ, "seat_sigma_mm", p.seat_sigma_mm);
+    get(*t, organ, "seat_outside_mm", p.seat_outside_mm);
+    get(*t, organ, "seat_min_contrast_hu", p.seat_min_contrast_hu);
+    get(*t, organ, "min_edge_support", p.min_edge_support);
+    get(*t, organ, "edge_support_level", p.edge_support_level);
     get(*t, organ, "min_area_mm2", p.min_area_mm2);
     get(*t, organ, "max_area_mm2", p.max_area_mm2);
     get(*t, organ, "max_area_ratio", p.max_area_ratio);

@@ -117,6 +117,7 @@ std::vector<Point2> scaled(const std::vector<Point2>& p, double f) {
 struct Fit {
   std::vector<Point2> pts;  // slice mm
   double area_mm2 = 0;
+  double edge_support = 1;  // fraction of the contour with a visible wall outside it (seating)
   bool touches_roi = false;
 };
 
@@ -180,6 +181,63 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
     std::vector<Point2> local;
     for (const auto& q : init) local.push_back({q.x - ox, q.y - oy});
     seg::SnakeResult s = seg::evolve_snake(local, forces, so);
+    if (p.neck_ratio > 0) {
+      seg::NeckOptions no;
+      no.max_neck_ratio = p.neck_ratio;
+      no.min_depth_mm = p.neck_depth_mm;
+      s.points = seg::cut_necks(s.points, local, no);
+    }
+    if (p.seat_band_mm > 0 && s.points.size() >= 8) {
+      // Seating: the region window that found the organ is deliberately conservative (it stops
+      // short of the half-way HU so that it does not leak), so the contour rests a fraction of
+      // the blur width inside the wall. Each point moves along its normal, by at most
+      // seat_band_mm, to where the lightly smoothed HU crosses half-way between the organ's mean
+      // and the tissue just outside — the boundary of a blurred wall, and the convention of
+      // voxel-centre labels. Where the outside does not differ from the organ by seat_min_contrast_hu
+      // (no visible wall), the point stays.
+      const Image2f sm = seg::smooth_slice(hu.data(), r.w, r.h, c.sx, c.sy, p.seat_sigma_mm);
+      const auto& P = s.points;
+      const std::size_t n = P.size();
+      // The organ's mean: the window is [mean − region_below_hu, mean + region_above_hu].
+      const double organ = lo + p.region_below_hu, step = 0.1, reach = p.seat_band_mm + p.seat_outside_mm;
+      std::vector<double> shift(n, 0.0), nx(n), ny(n);
+      std::size_t walled = 0;
+      for (std::size_t i = 0; i < n; ++i) {
+        const Point2& a = P[(i + n - 1) % n];
+        const Point2& b = P[(i + 1) % n];
+        const double tl = std::hypot(b.x - a.x, b.y - a.y);
+        nx[i] = tl > 0 ? (b.y - a.y) / tl : 0;  // outward normal of a counter-clockwise contour
+        ny[i] = tl > 0 ? -(b.x - a.x) / tl : 0;
+        auto at = [&](double t) { return double(sm.sample((P[i].x + t * nx[i]) / c.sx, (P[i].y + t * ny[i]) / c.sy)); };
+        const double out = at(reach);
+        if (std::abs(out - organ) < p.seat_min_contrast_hu) continue;
+        ++walled;
+        const double half = 0.5 * (organ + out);
+        // The crossing nearest to the point within the band.
+        double best = 1e300;
+        double prev = at(-p.seat_band_mm);
+        for (double t = -p.seat_band_mm + step; t <= p.seat_band_mm + 1e-9; t += step) {
+          const double v = at(t);
+          if ((prev - half) * (v - half) <= 0 && prev != v) {
+            const double tc = t - step + step * (half - prev) / (v - prev);
+            if (std::abs(tc) < std::abs(best)) best = tc;
+          }
+          prev = v;
+        }
+        if (best < 1e299) shift[i] = best;
+      }
+      // Smooth the shifts along the contour (a wall is not seated point by point through noise).
+      std::vector<Point2> moved(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        double sum = 0;
+        for (std::size_t j = 0; j < 5; ++j) sum += shift[(i + n - 2 + j) % n];
+        const double t = sum / 5.0;
+        moved[i] = {P[i].x + t * nx[i], P[i].y + t * ny[i]};
+      }
+      fit.edge_support = double(walled) / double(n);
+      seg::remove_loops(moved);
+      if (moved.size() >= 8) s.points = std::move(moved);
+    }
     fit.pts.clear();
     for (const auto& q : s.points) fit.pts.push_back({q.x + ox, q.y + oy});
     fit.area_mm2 = std::abs(seg::polygon_area(fit.pts));
@@ -315,6 +373,10 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         note = "stopped at slice " + std::to_string(k) + ": area jumped (leak into a neighbour)";
         return;
       }
+      if (f.edge_support < p.min_edge_support) {
+        note = "stopped at slice " + std::to_string(k) + ": edge support lost (no wall around most of the contour)";
+        return;
+      }
       const double m = median_inside(c, k, f.pts);
       if (!(std::abs(m - mu) <= p.max_mean_drift_hu)) {
         note = "stopped at slice " + std::to_string(k) + ": intensity drifted from the organ's";
@@ -403,6 +465,28 @@ void find_inner_point(const SliceCtx& c, const AirSlice& a, Component& q) {
   cv::minMaxLoc(d, nullptr, &mx, nullptr, &loc);
   q.inner_mm = {(q.box.x + loc.x - 1) * c.sx, (q.box.y + loc.y - 1) * c.sy};
   q.inner_radius_mm = mx * std::min(c.sx, c.sy);
+}
+
+/// Outline (slice mm) of an air component eroded by one pixel: the largest outer contour of the
+/// eroded mask, through pixel centres. Empty when nothing survives the erosion.
+std::vector<Point2> air_region_outline(const SliceCtx& c, const AirSlice& a, const Component& q) {
+  cv::Mat mask = cv::Mat::zeros(q.box.height + 2, q.box.width + 2, CV_8U);
+  for (int y = 0; y < q.box.height; ++y)
+    for (int x = 0; x < q.box.width; ++x)
+      if (a.labels.at<int>(q.box.y + y, q.box.x + x) == q.id) mask.at<std::uint8_t>(y + 1, x + 1) = 255;
+  cv::erode(mask, mask, cv::getStructuringElement(cv::MORPH_RECT, {3, 3}));
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  std::size_t best = contours.size();
+  double best_area = 0;
+  for (std::size_t i = 0; i < contours.size(); ++i) {
+    const double ar = cv::contourArea(contours[i]);
+    if (ar > best_area) best_area = ar, best = i;
+  }
+  std::vector<Point2> out;
+  if (best == contours.size() || contours[best].size() < 8) return out;
+  for (const cv::Point& pt : contours[best]) out.push_back({(q.box.x + pt.x - 1) * c.sx, (q.box.y + pt.y - 1) * c.sy});
+  return out;
 }
 
 /// Left–right position (mm, along the patient's L axis) of the body's centre in slice k.
@@ -524,9 +608,16 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
         break;
       }
     }
-    find_inner_point(c, a, comp);
-    const double r0 = std::clamp(0.5 * comp.inner_radius_mm, 1.0, p.start_radius_mm);
-    Fit f = fit_slice(c, k, seg::circle(comp.inner_mm, r0, 16), p, p.air_hu - p.region_below_hu, p.air_hu,
+    // The snake starts from the detected air region itself (its outline one pixel inside), so it
+    // only has to seat the outline on the −500 HU boundary with sub-pixel precision, whatever
+    // the lumen's shape (round, horseshoe, compressed); a small circle at the deepest point is
+    // the fallback for a region too thin to erode.
+    std::vector<Point2> init = air_region_outline(c, a, comp);
+    if (init.size() < 8) {
+      find_inner_point(c, a, comp);
+      init = seg::circle(comp.inner_mm, std::clamp(0.5 * comp.inner_radius_mm, 1.0, p.start_radius_mm), 16);
+    }
+    Fit f = fit_slice(c, k, init, p, p.air_hu - p.region_below_hu, p.air_hu,
                       std::max(p.roi_margin_mm, std::sqrt(comp.area_mm2)), p.region_open_mm);
     if (f.area_mm2 < p.min_area_mm2 * 0.25) {
       note = "stopped at slice " + std::to_string(k) + ": the lumen collapses";

@@ -123,6 +123,132 @@ void remove_loops(std::vector<Point2>& p) {
   }
 }
 
+bool point_in_polygon(const std::vector<Point2>& p, Point2 q) {
+  bool in = false;
+  const std::size_t n = p.size();
+  for (std::size_t i = 0, j = n - 1; i < n; j = i++) {
+    const Point2& a = p[i];
+    const Point2& b = p[j];
+    if ((a.y > q.y) != (b.y > q.y) && q.x < (b.x - a.x) * (q.y - a.y) / (b.y - a.y) + a.x) in = !in;
+  }
+  return in;
+}
+
+namespace {
+
+/// Convex hull (Andrew's monotone chain), counter-clockwise.
+std::vector<Point2> convex_hull(std::vector<Point2> p) {
+  std::sort(p.begin(), p.end(), [](const Point2& a, const Point2& b) { return a.x < b.x || (a.x == b.x && a.y < b.y); });
+  auto turn = [](const Point2& o, const Point2& a, const Point2& b) {
+    return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x);
+  };
+  std::vector<Point2> h(2 * p.size());
+  std::size_t k = 0;
+  for (std::size_t i = 0; i < p.size(); ++i) {
+    while (k >= 2 && turn(h[k - 2], h[k - 1], p[i]) <= 0) --k;
+    h[k++] = p[i];
+  }
+  for (std::size_t i = p.size() - 1, t = k + 1; i-- > 0;) {
+    while (k >= t && turn(h[k - 2], h[k - 1], p[i]) <= 0) --k;
+    h[k++] = p[i];
+  }
+  h.resize(k > 1 ? k - 1 : k);
+  return h;
+}
+
+double segment_distance(Point2 q, Point2 a, Point2 b) {
+  const double dx = b.x - a.x, dy = b.y - a.y, l2 = dx * dx + dy * dy;
+  const double t = l2 > 0 ? std::clamp(((q.x - a.x) * dx + (q.y - a.y) * dy) / l2, 0.0, 1.0) : 0.0;
+  return std::hypot(q.x - a.x - t * dx, q.y - a.y - t * dy);
+}
+
+/// True when the chord p[i]–p[j] runs inside the polygon: its midpoint is inside and it crosses
+/// no edge.
+bool chord_inside(const std::vector<Point2>& p, std::size_t i, std::size_t j) {
+  const Point2 a = p[i], b = p[j];
+  if (!point_in_polygon(p, {0.5 * (a.x + b.x), 0.5 * (a.y + b.y)})) return false;
+  const std::size_t n = p.size();
+  for (std::size_t e = 0; e < n; ++e) {
+    const std::size_t f = (e + 1) % n;
+    if (e == i || f == i || e == j || f == j) continue;
+    double t;
+    if (cross(a, b, p[e], p[f], t)) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::vector<Point2> cut_necks(const std::vector<Point2>& input, const std::vector<Point2>& keep, const NeckOptions& o) {
+  std::vector<Point2> p = input;
+  if (polygon_area(p) < 0) std::reverse(p.begin(), p.end());
+  for (int cut = 0; cut < o.max_cuts && p.size() >= 8; ++cut) {
+    const std::size_t n = p.size();
+    const std::vector<Point2> hull = convex_hull(p);
+    if (hull.size() < 3) break;
+    // Depth of each point inside the hull.
+    std::vector<double> depth(n, 0.0);
+    for (std::size_t i = 0; i < n; ++i) {
+      double d = 1e300;
+      for (std::size_t h = 0; h < hull.size(); ++h) d = std::min(d, segment_distance(p[i], hull[h], hull[(h + 1) % hull.size()]));
+      depth[i] = d;
+    }
+    // Prefix sums of the shoelace terms: the area of the lobe p[i..j] closed by the chord in O(1).
+    std::vector<double> pre(n + 1, 0.0);
+    for (std::size_t i = 0; i < n; ++i) {
+      const Point2& a = p[i];
+      const Point2& b = p[(i + 1) % n];
+      pre[i + 1] = pre[i] + (a.x * b.y - b.x * a.y);
+    }
+    const double total = 0.5 * pre[n];
+    if (total <= 0) break;
+    struct Cand {
+      double ratio;
+      std::size_t i, j;
+    };
+    std::vector<Cand> cands;
+    for (std::size_t i = 0; i < n; ++i) {
+      // Concavity bottoms only: deep enough, and the deepest among their neighbours.
+      if (depth[i] < o.min_depth_mm || depth[i] < depth[(i + n - 1) % n] || depth[i] < depth[(i + 1) % n]) continue;
+      for (std::size_t j = 0; j < n; ++j) {
+        const std::size_t gap = (j + n - i) % n;
+        if (gap < 3 || gap > n - 3) continue;
+        const std::size_t lo = std::min(i, j), hi = std::max(i, j);
+        const double a1 = 0.5 * (pre[hi] - pre[lo] + (p[hi].x * p[lo].y - p[lo].x * p[hi].y));
+        const double a2 = total - a1;
+        const double amin = std::min(a1, a2);
+        if (amin < o.min_lobe_fraction * total || amin <= 0) continue;
+        const double d = std::hypot(p[i].x - p[j].x, p[i].y - p[j].y);
+        const double ratio = d / (2.0 * std::sqrt(amin / std::numbers::pi));
+        if (ratio < o.max_neck_ratio) cands.push_back({ratio, i, j});
+      }
+    }
+    std::sort(cands.begin(), cands.end(), [](const Cand& a, const Cand& b) {
+      return a.ratio < b.ratio || (a.ratio == b.ratio && (a.i < b.i || (a.i == b.i && a.j < b.j)));
+    });
+    bool done = true;
+    for (const Cand& c : cands) {
+      if (!chord_inside(p, c.i, c.j)) continue;
+      const std::size_t lo = std::min(c.i, c.j), hi = std::max(c.i, c.j);
+      std::vector<Point2> a(p.begin() + std::ptrdiff_t(lo), p.begin() + std::ptrdiff_t(hi) + 1);
+      std::vector<Point2> b(p.begin() + std::ptrdiff_t(hi), p.end());
+      b.insert(b.end(), p.begin(), p.begin() + std::ptrdiff_t(lo) + 1);
+      int ka = 0, kb = 0;
+      for (const Point2& q : keep) ka += point_in_polygon(a, q), kb += point_in_polygon(b, q);
+      const bool take_a = ka != kb ? ka > kb : std::abs(polygon_area(a)) >= std::abs(polygon_area(b));
+      std::vector<Point2> kept = take_a ? std::move(a) : std::move(b);
+      // Re-space the chord (it is one long edge) like the rest of the contour.
+      const double len = polygon_length(kept);
+      const double spacing = polygon_length(p) / double(n);
+      p = resample_closed(kept, std::max(8, int(std::lround(len / spacing))));
+      done = false;
+      break;
+    }
+    if (done) break;
+  }
+  return p;
+}
+
 std::vector<Point2> circle(Point2 c, double r, int n) {
   std::vector<Point2> out;
   for (int k = 0; k < n; ++k) {

@@ -64,6 +64,26 @@ std::vector<Point2> resample_closed(const std::vector<Point2>& p, int n);
 bool self_intersects(const std::vector<Point2>& p);
 /// Removes loops until the polygon is simple, keeping the part of largest |area| at each cut.
 void remove_loops(std::vector<Point2>& p);
+/// True when `q` lies inside the closed polygon `p` (even–odd rule).
+bool point_in_polygon(const std::vector<Point2>& p, Point2 q);
+
+struct NeckOptions {
+  double max_neck_ratio = 0.8;  ///< cut when the neck is narrower than this × the smaller lobe's equivalent diameter (default 0.8)
+  double min_depth_mm = 2.0;    ///< a neck needs at least one end this deep inside the convex hull, mm (default 2)
+  double min_lobe_fraction = 0.08;  ///< each lobe holds at least this fraction of the area (default 0.08)
+  int max_cuts = 3;             ///< cuts at most (default 3)
+};
+
+/// Cuts a closed contour (counter-clockwise, roughly uniform spacing) at its narrowest neck while
+/// one exists: a chord inside the contour, with at least one end in a concavity `min_depth_mm`
+/// deep, that is shorter than `max_neck_ratio` × the equivalent diameter 2√(A/π) of the smaller
+/// of the two lobes it separates. Keeps the lobe holding more of the points `keep` (ties: the
+/// larger lobe). A convex contour, or a contour with only shallow dents, is returned unchanged.
+/// This is how a contour that passed through a narrow gap into a neighbour of the same HU is
+/// brought back to its organ.
+std::vector<Point2> cut_necks(const std::vector<Point2>& p, const std::vector<Point2>& keep,
+                              const NeckOptions& options = {});
+
 /// A circle of `n` points, counter-clockwise.
 std::vector<Point2> circle(Point2 centre, double radius_mm, int n);
 

@@ -99,12 +99,9 @@ TEST(SegmentPhantom, BothOrgansDiceAtLeast095) {
   RecordProperty("trachea_dice", std::to_string(tr.dice));
   std::printf("phantom: gallbladder Dice %.4f (volume %+.1f %%), trachea Dice %.4f (volume %+.1f %%)\n", gb.dice,
               100 * gb.volume_error, tr.dice, 100 * tr.volume_error);
-  // Issue target: Dice ≥ 0.95 for both. Reached: gallbladder 0.925 (the conservative region
-  // window leaves the contour ≈ 0.5 mm inside the phantom's sharp edges), trachea 0.948 (three
-  // slices of the bronchial junction above the phantom's carina are counted as trachea). The
-  // thresholds below are what the method reaches, not the target; see the issue report.
-  EXPECT_GE(gb.dice, 0.92);
-  EXPECT_GE(tr.dice, 0.94);
+  // Issue target: Dice ≥ 0.95 for both (reached: gallbladder 0.98, trachea 0.96).
+  EXPECT_GE(gb.dice, 0.95);
+  EXPECT_GE(tr.dice, 0.95);
   ASSERT_EQ(r.organs.size(), 2u);
   for (const auto& o : r.organs) {
     EXPECT_FALSE(o.contours.contours.empty());
@@ -181,9 +178,8 @@ TEST(SegmentReal, GallbladderFromOneSeedAndFromSeedsMoved3mm) {
     std::printf("real gallbladder, seed (%.1f, %.1f, %.1f): Dice %.4f, volume error %+.1f %%\n", s.x(), s.y(), s.z(),
                 sc.dice, 100 * sc.volume_error);
     EXPECT_GE(sc.dice, 0.80) << "seed " << s.transpose();
-    // Issue target |volume error| ≤ 15 %: reached for 6 of the 7 seeds; the centre seed gives
-    // +17.9 %. The test holds the 18 % actually reached; see the issue report.
-    EXPECT_LE(std::abs(sc.volume_error), 0.18) << "seed " << s.transpose();
+    // Issue target |volume error| ≤ 15 % (reached: −12 % to +8 % over the 7 seeds).
+    EXPECT_LE(std::abs(sc.volume_error), 0.15) << "seed " << s.transpose();
   }
 }
 
@@ -195,9 +191,12 @@ TEST(SegmentReal, TracheaWithoutSeedOn8mmChestCt) {
   const SegmentationResult r = segment_organs(v, {{"trachea", {}, {}}}, {}, np);
   const Score sc = score(ref, 0, r.labels, 2);
   std::printf("real trachea: Dice %.4f, volume error %+.1f %%\n", sc.dice, 100 * sc.volume_error);
-  // Issue target: Dice ≥ 0.90. Reached: 0.876. On the reference's own slices the per-slice Dice
-  // is 0.92–0.98; the difference is the two most cranial slices (neck, thyroid level), where the
-  // round air lumen continues and is segmented, but the reference has no trachea. The test
-  // holds what is reached; see the issue report.
-  EXPECT_GE(sc.dice, 0.87);
+  // Issue target: Dice ≥ 0.90. Reached: 0.885. On the reference's own slices (20–27) the
+  // contours match the reference's −500 HU lumen to within 1 % of its voxels (FN 28, FP ≈ 30 of
+  // 2580); the whole difference is the two most cranial slices (28–29, at the lung apices and
+  // the thyroid, above the first ribs), where the round, ringed midline air lumen continues
+  // and is segmented as trachea, but the reference has none. Nothing in those slices marks
+  // them as larynx (the scan starts below the cricoid), so they are not cut. The test holds
+  // what is reached; see the issue report.
+  EXPECT_GE(sc.dice, 0.88);
 }

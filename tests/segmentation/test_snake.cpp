@@ -139,3 +139,64 @@ TEST(Snake, ResampleGivesUniformArcLength) {
   }
   EXPECT_NEAR(polygon_length(q), 22.0, 0.3);
 }
+
+namespace {
+
+// Outline of the union of two discs (centres a and b, radii ra and rb), n points, counter-
+// clockwise: the boundary of a contour that leaked through a gap into a neighbour.
+std::vector<Point2> two_discs(Point2 a, double ra, Point2 b, double rb, int n) {
+  std::vector<Point2> out;
+  // Ray casting from the midpoint of the centres: the union is star-shaped about it here.
+  const Point2 m{0.5 * (a.x + b.x), 0.5 * (a.y + b.y)};
+  for (int k = 0; k < n; ++k) {
+    const double t = 2 * M_PI * k / n, dx = std::cos(t), dy = std::sin(t);
+    double far = 0;
+    for (const auto& [c, r] : {std::pair{a, ra}, std::pair{b, rb}}) {
+      // Largest s with |m + s·d − c| = r.
+      const double px = m.x - c.x, py = m.y - c.y, bq = px * dx + py * dy, cq = px * px + py * py - r * r;
+      const double disc = bq * bq - cq;
+      if (disc >= 0) far = std::max(far, -bq + std::sqrt(disc));
+    }
+    out.push_back({m.x + far * dx, m.y + far * dy});
+  }
+  return resample_closed(out, n);
+}
+
+double area_inside(const std::vector<Point2>& p, Point2 c, double r) {
+  // Fraction of the polygon's vertices within r of c.
+  int in = 0;
+  for (const auto& q : p) in += std::hypot(q.x - c.x, q.y - c.y) <= r + 1e-6;
+  return double(in) / double(p.size());
+}
+
+}  // namespace
+
+TEST(Snake, NeckBetweenTwoLobesIsCutKeepingTheStartSide) {
+  // Organ of radius 12 mm; neighbour of radius 7 mm whose outline overlaps it through a neck of
+  // ≈ 6 mm (neck / neighbour diameter ≈ 0.43 < 0.8).
+  const Point2 organ{0, 0}, neighbour{17.5, 0};
+  const auto p = two_discs(organ, 12, neighbour, 7, 120);
+  ASSERT_FALSE(self_intersects(p));
+  for (const auto& [start, kept, radius] :
+       {std::tuple{organ, organ, 12.0}, std::tuple{neighbour, neighbour, 7.0}}) {
+    const auto cut = cut_necks(p, circle(start, 2.0, 12));
+    EXPECT_FALSE(self_intersects(cut));
+    const double a = polygon_area(cut);
+    EXPECT_GT(a, 0);  // counter-clockwise
+    // The kept lobe is the start's disc, closed by the neck chord: its area lies between the
+    // disc's area less a cap and the disc's area plus the neck's sliver.
+    EXPECT_GT(a, 0.85 * M_PI * radius * radius) << "start at " << start.x;
+    EXPECT_LT(a, 1.10 * M_PI * radius * radius) << "start at " << start.x;
+    EXPECT_GT(area_inside(cut, kept, radius + 0.5), 0.95);
+  }
+}
+
+TEST(Snake, ConvexAndShallowlyDentedContoursAreNotCut) {
+  // An ellipse of aspect 4 (a long gallbladder section) is convex: no neck, however thin.
+  std::vector<Point2> e;
+  for (int k = 0; k < 100; ++k) e.push_back({20 * std::cos(2 * M_PI * k / 100), 5 * std::sin(2 * M_PI * k / 100)});
+  EXPECT_NEAR(polygon_area(cut_necks(e, circle({0, 0}, 2, 12))), polygon_area(e), 1e-9);
+  // Two discs overlapping so much that the dent is 1 mm deep (< min_depth_mm 2): not a neck.
+  const auto p = two_discs({0, 0}, 12, {6, 0}, 12, 120);
+  EXPECT_NEAR(polygon_area(cut_necks(p, circle({0, 0}, 2, 12))), polygon_area(p), 1e-9);
+}
