@@ -7,7 +7,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <map>
 #include <vector>
 
 namespace organsmith::meshing_detail {
@@ -59,6 +58,27 @@ double signed_volume(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const E
 
 using Tet = std::array<std::int32_t, 4>;
 
+/// Every face of every tet with the tet it belongs to, sorted: copies of a face are adjacent.
+std::vector<std::pair<Face, std::size_t>> sorted_faces(const TetMesh& m) {
+  std::vector<std::pair<Face, std::size_t>> f;
+  f.reserve(4 * m.tets.size());
+  for (std::size_t t = 0; t < m.tets.size(); ++t)
+    for (const auto& k : kFaces) f.emplace_back(key(m.tets[t][k[0]], m.tets[t][k[1]], m.tets[t][k[2]]), t);
+  std::sort(f.begin(), f.end());
+  return f;
+}
+
+/// Calls `run(first, count)` for each group of equal faces in `f`.
+template <class Run>
+void for_each_face(const std::vector<std::pair<Face, std::size_t>>& f, Run run) {
+  for (std::size_t i = 0; i < f.size();) {
+    std::size_t j = i + 1;
+    while (j < f.size() && f[j].first == f[i].first) ++j;
+    run(i, j - i);
+    i = j;
+  }
+}
+
 }  // namespace
 
 int flip_tets(TetMesh& m, double min_dih, double max_re) {
@@ -78,19 +98,25 @@ int flip_tets(TetMesh& m, double min_dih, double max_re) {
   std::vector<Tet> tets = m.tets;
   std::vector<std::int32_t> regions = m.region_ids;
   std::vector<char> alive(tets.size(), 1);
-  std::map<Face, std::vector<std::size_t>> face_tets;
-  std::map<std::array<std::int32_t, 2>, std::vector<std::size_t>> edge_tets;
-  auto edge_key = [](std::int32_t a, std::int32_t b) { return std::array<std::int32_t, 2>{std::min(a, b), std::max(a, b)}; };
+  // Vertex stars (tets using each vertex); tets made by a flip are appended, dead ones stay and
+  // are skipped. The tets around a face or an edge are the live tets in all of its stars.
+  std::vector<std::vector<std::size_t>> star(P.size());
+  for (std::size_t t = 0; t < tets.size(); ++t)
+    for (auto v : tets[t]) star[v].push_back(t);
   auto add = [&](std::size_t t) {
-    for (const auto& f : kFaces) face_tets[key(tets[t][f[0]], tets[t][f[1]], tets[t][f[2]])].push_back(t);
-    for (int i = 0; i < 4; ++i)
-      for (int j = i + 1; j < 4; ++j) edge_tets[edge_key(tets[t][i], tets[t][j])].push_back(t);
+    for (auto v : tets[t]) star[v].push_back(t);
   };
-  auto live = [&](std::vector<std::size_t> v) {
-    v.erase(std::remove_if(v.begin(), v.end(), [&](std::size_t t) { return !alive[t]; }), v.end());
-    return v;
+  auto around = [&](std::initializer_list<std::int32_t> verts) {
+    std::vector<std::size_t> out;
+    const std::int32_t first = *verts.begin();
+    for (auto t : star[first]) {
+      if (!alive[t]) continue;
+      bool all = true;
+      for (auto v : verts) all &= std::find(tets[t].begin(), tets[t].end(), v) != tets[t].end();
+      if (all) out.push_back(t);
+    }
+    return out;
   };
-  for (std::size_t t = 0; t < tets.size(); ++t) add(t);
 
   int flips = 0;
   const std::size_t n0 = tets.size();
@@ -104,9 +130,9 @@ int flip_tets(TetMesh& m, double min_dih, double max_re) {
     // 2-3 across each face.
     for (const auto& f : kFaces) {
       const Face k = key(tets[t][f[0]], tets[t][f[1]], tets[t][f[2]]);
-      const auto around = live(face_tets[k]);
-      if (around.size() != 2) continue;
-      const std::size_t o = around[0] == t ? around[1] : around[0];
+      const auto pair = around({k[0], k[1], k[2]});
+      if (pair.size() != 2) continue;
+      const std::size_t o = pair[0] == t ? pair[1] : pair[0];
       if (regions[o] != regions[t]) continue;
       std::int32_t e = -1;
       for (auto v : tets[o])
@@ -130,7 +156,7 @@ int flip_tets(TetMesh& m, double min_dih, double max_re) {
     for (int i = 0; i < 4; ++i)
       for (int j = i + 1; j < 4; ++j) {
         const std::int32_t u = tets[t][i], v = tets[t][j];
-        const auto ring = live(edge_tets[edge_key(u, v)]);
+        const auto ring = around({u, v});
         if (ring.size() != 3) continue;
         bool same_region = true;
         std::vector<std::int32_t> others;
@@ -143,7 +169,7 @@ int flip_tets(TetMesh& m, double min_dih, double max_re) {
         if (!same_region || others.size() != 3) continue;
         // Every face of the ring that contains the edge must be shared by two ring tets.
         bool closed = true;
-        for (auto w : others) closed &= live(face_tets[key(u, v, w)]).size() == 2;
+        for (auto w : others) closed &= around({u, v, w}).size() == 2;
         if (!closed) continue;
         Tet a{others[0], others[1], others[2], u}, b{others[0], others[2], others[1], v};
         if (signed_volume(P[a[0]], P[a[1]], P[a[2]], P[a[3]]) < 0) std::swap(a[1], a[2]), std::swap(b[1], b[2]);
@@ -178,13 +204,14 @@ TetImproveStats improve_tets(TetMesh& m, double min_dih, double max_re) {
   const std::size_t nv = m.vertices_lps_mm.size();
 
   // Vertices that must not move: on the boundary or on an interface between regions.
-  std::map<Face, std::vector<std::size_t>> face_tets;
-  for (std::size_t t = 0; t < m.tets.size(); ++t)
-    for (const auto& f : kFaces) face_tets[key(m.tets[t][f[0]], m.tets[t][f[1]], m.tets[t][f[2]])].push_back(t);
   std::vector<char> fixed(nv, 0);
-  for (const auto& [f, ts] : face_tets)
-    if (ts.size() == 1 || (ts.size() == 2 && m.region_ids[ts[0]] != m.region_ids[ts[1]]))
-      for (auto v : f) fixed[v] = 1;
+  {
+    const auto faces = sorted_faces(m);
+    for_each_face(faces, [&](std::size_t i, std::size_t n) {
+      if (n == 1 || (n == 2 && m.region_ids[faces[i].second] != m.region_ids[faces[i + 1].second]))
+        for (auto v : faces[i].first) fixed[v] = 1;
+    });
+  }
   // Vertex relocation (the stars change after flips, so they are rebuilt each time).
   auto smooth = [&] {
     std::vector<std::vector<std::size_t>> star(nv);
@@ -257,17 +284,15 @@ TetImproveStats improve_tets(TetMesh& m, double min_dih, double max_re) {
 
   // Peel failing tets lying on the outer boundary with two or more of their faces.
   for (int pass = 0; pass < 3; ++pass) {
-    std::map<Face, int> count;
-    for (const auto& T : m.tets)
-      for (const auto& f : kFaces) ++count[key(T[f[0]], T[f[1]], T[f[2]])];
+    std::vector<int> boundary(m.tets.size(), 0);
+    const auto faces = sorted_faces(m);
+    for_each_face(faces, [&](std::size_t i, std::size_t n) {
+      if (n == 1) ++boundary[faces[i].second];
+    });
     std::vector<char> drop(m.tets.size(), 0);
     int peeled = 0;
-    for (std::size_t t = 0; t < m.tets.size(); ++t) {
-      if (tet_score(m, t, min_dih, max_re) >= 1.0) continue;
-      int boundary = 0;
-      for (const auto& f : kFaces) boundary += count[key(m.tets[t][f[0]], m.tets[t][f[1]], m.tets[t][f[2]])] == 1;
-      if (boundary >= 2) drop[t] = 1, ++peeled;
-    }
+    for (std::size_t t = 0; t < m.tets.size(); ++t)
+      if (boundary[t] >= 2 && tet_score(m, t, min_dih, max_re) < 1.0) drop[t] = 1, ++peeled;
     if (peeled == 0) break;
     std::vector<std::array<std::int32_t, 4>> tets;
     std::vector<std::int32_t> regions;
