@@ -8,6 +8,7 @@
 #include "meshing/tet_improve.h"
 
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_invoke.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -281,33 +282,39 @@ OrganMesh mesh_one(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOpti
   const Field3& F = p.field;
   const Box ext = p.extended;
 
-  // The organ (or lumen) surface.
   const LabelFunction organ = [&](const Eigen::Vector3d& q) { return inside(ext, q) && F.sample(q) >= iso ? 1 : 0; };
   std::vector<std::string> notes;
-  SurfaceMesh outer = make_surface(organ, p, o, any_cut, notes);
-  progress.check_cancelled();
-
+  // The organ (or lumen) surface runs beside the distance field and the wall or body surface
+  // built on it: two independent Mesh_3 runs, each sequential and seeded on its own thread.
+  SurfaceMesh outer;
   Field3 sdf;
-  if (spec.model != OrganModel::solid) sdf = signed_distance(p.fine, iso);
   const double t = spec.wall_mm;
   const Box clip = p.clip;
-
   std::vector<std::pair<std::string, SurfaceMesh>> extra;  // grid frame
   SurfaceMesh tube_wall;
-  if (spec.model == OrganModel::wall_body) {
-    const LabelFunction body = [&](const Eigen::Vector3d& q) { return inside(ext, q) && sdf.sample(q) <= -t ? 1 : 0; };
-    bool has_body = false;
-    for (float v : sdf.v) has_body |= v <= -t;
-    if (has_body)
-      extra.emplace_back(spec.name + "_wall_inner", make_surface(body, p, o, any_cut, notes));
-    else
-      out.warnings.push_back(spec.name + " is nowhere thicker than twice its " + fmt(t) + " mm wall: wall only, no body");
-  } else if (spec.model == OrganModel::tube) {
-    const LabelFunction wall = [&](const Eigen::Vector3d& q) {
-      return inside(ext, q) && F.sample(q) < iso && sdf.sample(q) <= t ? 1 : 0;
-    };
-    tube_wall = make_surface(wall, p, o, true, notes);
-  }
+  std::vector<std::string> inner_notes;
+  tbb::parallel_invoke(
+      [&] { outer = make_surface(organ, p, o, any_cut, notes); },
+      [&] {
+        if (spec.model == OrganModel::solid) return;
+        sdf = signed_distance(p.fine, iso);
+        if (spec.model == OrganModel::wall_body) {
+          const LabelFunction body = [&](const Eigen::Vector3d& q) { return inside(ext, q) && sdf.sample(q) <= -t ? 1 : 0; };
+          bool has_body = false;
+          for (float v : sdf.v) has_body |= v <= -t;
+          if (has_body)
+            extra.emplace_back(spec.name + "_wall_inner", make_surface(body, p, o, any_cut, inner_notes));
+          else
+            inner_notes.push_back("nowhere thicker than twice its " + fmt(t) + " mm wall: wall only, no body");
+        } else if (spec.model == OrganModel::tube) {
+          const LabelFunction wall = [&](const Eigen::Vector3d& q) {
+            return inside(ext, q) && F.sample(q) < iso && sdf.sample(q) <= t ? 1 : 0;
+          };
+          tube_wall = make_surface(wall, p, o, true, inner_notes);
+        }
+      });
+  notes.insert(notes.end(), inner_notes.begin(), inner_notes.end());
+  progress.check_cancelled();
   for (auto& n : notes) out.warnings.push_back(spec.name + ": " + n);
   out.seconds_surface = seconds_since(t0);
   progress.check_cancelled();
