@@ -2,6 +2,10 @@
 // directory) and `preview` (the interactive window with a mouse-driven tool).
 
 #include "core/errors.h"
+#include "physics/contact.h"
+#include "physics/guidance.h"
+#include "physics/haptic_loop.h"
+#include "physics/models.h"
 #include "pipeline/commands.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
@@ -65,24 +69,108 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
   return 0;
 }
 
-int cmd_preview(const std::string& out_arg, const std::string& size, double quit_after_s, const LoadFlags& flags) {
+struct PreviewFlags {
+  std::string out, size, path, mode = "mixed", screenshot;
+  std::vector<double> start;
+  double quit_after_s = 0;
+  double rate_Hz = 1000.0;
+  LoadFlags load;
+  physics::ContactOptions contact;
+};
+
+/// The organs the tool touches and the law each is felt with (as `organsmith haptics`): the
+/// gallbladder with the organ law, the trachea with its wall law.
+struct TouchedOrgan {
+  const char* organ;
+  const char* region;
+};
+constexpr TouchedOrgan kTouched[] = {{"gallbladder", "gallbladder_body"}, {"trachea", "trachea_wall"}};
+
+int cmd_preview(const PreviewFlags& f) {
   PreviewOptions options;
-  if (!size.empty()) std::tie(options.width_px, options.height_px) = parse_size(size);
-  options.quit_after_s = quit_after_s;
+  if (!f.size.empty()) std::tie(options.width_px, options.height_px) = parse_size(f.size);
+  options.quit_after_s = f.quit_after_s;
+  options.screenshot_png = f.screenshot;
+  if (!f.start.empty()) {
+    if (f.start.size() != 3) throw UsageError("--start takes three coordinates (LPS mm)", "e.g. --start 60,-20,-150");
+    options.start_lps_mm = Eigen::Vector3d(f.start[0], f.start[1], f.start[2]);
+  }
   options.on_event = [](const std::string& e) { std::cout << "preview: " << e << std::endl; };
+  PreviewHaptics haptics;
+  haptics.loop.mode = physics::parse_force_mode(f.mode);
+  haptics.loop.rate_Hz = f.rate_Hz;
+  physics::validate(haptics.loop);
+  physics::validate(f.contact);
+  const fs::path out = fs::absolute(f.out);
   TerminalProgress progress;
   OutputScene os;
-  LoadFlags f = flags;
-  f.need_ct = false;         // the window shows surfaces and paths only
-  f.context_step_vox = 0;    // organs only: translucent context costs the 30 fps on llvmpipe
-  load_output_scene(fs::absolute(out_arg), f, os, progress);
+  LoadFlags lf = f.load;
+  lf.need_ct = false;         // the window shows surfaces and paths only
+  lf.context_step_vox = 0;    // organs only: translucent context costs the 30 fps on llvmpipe
+  lf.plots = false;
+  load_output_scene(out, lf, os, progress);
   progress.finish();
   for (const auto& m : os.missing) spdlog::info("not found: {}", m);
   if (os.scene.surfaces.empty())
-    throw InputError(ExitCode::input_not_found, "nothing to show: no meshes and no label map", fs::absolute(out_arg),
-                     "run `organsmith run --out " + out_arg + "` first");
-  spdlog::info("preview: the tool is passive until the haptics stage lands (no force is computed)");
-  run_preview(os.scene, options);
+    throw InputError(ExitCode::input_not_found, "nothing to show: no meshes and no label map", out,
+                     "run `organsmith run --out " + f.out + "` first");
+
+  // The guidance path: the one asked for, else the incision, the dissection, the centreline.
+  const ScenePath* chosen = nullptr;
+  if (!f.path.empty()) {
+    for (const auto& p : os.scene.paths)
+      if (p.line.name == f.path) chosen = &p;
+    if (!chosen) {
+      std::string names;
+      for (const auto& p : os.scene.paths) names += (names.empty() ? "" : ", ") + p.line.name;
+      throw UsageError("no guidance path '" + f.path + "' in " + (out / "paths").string(),
+                       names.empty() ? "run `organsmith guide " + f.out + "` first" : "paths there: " + names);
+    }
+  } else {
+    for (const char* name : {"trachea_incision", "gallbladder_dissection", "trachea_centerline"})
+      for (const auto& p : os.scene.paths)
+        if (!chosen && p.line.name == name) chosen = &p;
+    if (!chosen && !os.scene.paths.empty()) chosen = &os.scene.paths.front();
+  }
+  std::optional<physics::PathIndex> path;
+  if (chosen) {
+    path.emplace(chosen->line);
+    haptics.path = &*path;
+    haptics.path_name = chosen->line.name;
+  }
+
+  // The contact surfaces: each touched organ's outermost drawn surface (the wall, or the organ
+  // itself), felt with its region's calibrated law.
+  std::vector<SurfaceMesh> surfaces;
+  std::vector<physics::StressTable> tables;
+  std::string felt;
+  for (const auto& t : kTouched) {
+    int best = -1;
+    double best_volume = 0;
+    for (std::size_t i = 0; i < os.scene.surfaces.size(); ++i) {
+      const SceneSurface& s = os.scene.surfaces[i];
+      if (s.context || s.organ != t.organ) continue;
+      const double v = outer_extent_mm3(s.mesh);
+      if (best < 0 || v > best_volume) best = int(i), best_volume = v;
+    }
+    if (best < 0) continue;
+    const RegionLaw law = region_law(out, t.region);
+    surfaces.push_back(os.scene.surfaces[best].mesh);
+    tables.push_back(physics::StressTable::from_material(law.material, law.options, 0.6));
+    haptics.contact_scene_surfaces.push_back(best);
+    felt += std::string(felt.empty() ? "" : ", ") + os.scene.surfaces[best].name + " (" + t.region + ", " +
+            law.material.model + (law.from_output ? "" : ", built-in preset") + ")";
+  }
+  std::unique_ptr<physics::ContactModel> contact;
+  if (!surfaces.empty()) {
+    contact = std::make_unique<physics::ContactModel>(physics::SurfaceIndex(std::move(surfaces)), std::move(tables),
+                                                      f.contact);
+    haptics.contact = contact.get();
+  }
+  spdlog::info("preview: haptic loop at {:.0f} Hz, mode {}; guidance path: {}; contact: {}", haptics.loop.rate_Hz,
+               f.mode, chosen ? chosen->line.name : std::string("none (run `organsmith guide`)"),
+               felt.empty() ? std::string("none") : felt);
+  run_preview(os.scene, options, haptics);
   return 0;
 }
 
@@ -101,33 +189,46 @@ std::vector<Command> viewer_commands(CLI::App& app) {
       "snapshot",
       "Render PNG views of what a run left in OUT_DIR into OUT_DIR/snapshots/ (replaced atomically):\n"
       "3D organ models, all organs with paths, axial/coronal/sagittal slices with the segmentation\n"
-      "outline, tetrahedral cuts coloured by quality. Needs no display (starts a private Xvfb).");
+      "outline, tetrahedral cuts coloured by quality, plots of the calibrated tissue laws, Monte Carlo\n"
+      "CDFs and calibration fits. Needs no display (starts a private Xvfb).");
   snap->add_option("OUT_DIR", sa->out, "output directory of `organsmith run`")->required();
   snap->add_option("--views", sa->views, "views to render: organs overview slices tets plots (default: all)")
       ->delimiter(',');
   snap->add_option("--size", sa->size, "PNG size WIDTHxHEIGHT (default 1024x768)");
   snap->add_option("--ct", sa->load.ct, "CT to slice (default: OUT_DIR/phantom/dicom or the case's input)");
+  snap->add_option("--calibration", sa->load.calibration_dirs,
+                   "output directories of `organsmith calibrate` / `uncertainty --method mc` to plot (those under "
+                   "OUT_DIR are found by themselves)")
+      ->check(CLI::ExistingDirectory);
   snap->add_option("--labels", sa->load.labels,
                    "label map to outline (default: OUT_DIR/labels.nii.gz, else the phantom's ground truth)");
   commands.push_back({snap, [sa] { return cmd_snapshot(sa->out, sa->views, sa->size, sa->load); }});
 
-  struct PreviewArgs {
-    std::string out, size;
-    double quit_after_s = 0;
-    LoadFlags load;
-  };
-  auto pa = std::make_shared<PreviewArgs>();
+  auto pa = std::make_shared<PreviewFlags>();
   auto* prev = app.add_subcommand(
       "preview",
-      "Open the interactive preview of OUT_DIR: organs, paths and a tool proxy. The mouse moves the\n"
-      "tool (wheel: depth; left drag turns the view); keys 1/2/3 switch guidance-only, mixed and\n"
-      "reaction-only modes; q quits. The tool is passive until the haptics stage lands.");
+      "Open the interactive preview of OUT_DIR: organs, guidance paths and a tool proxy driven by the\n"
+      "mouse through the 1 kHz haptic loop (guidance force toward the path, reaction force from the\n"
+      "organs' calibrated laws; the organ surface dents under the tool). Mouse motion moves the hand in\n"
+      "the screen plane, the wheel in depth, left drag turns the view; keys 1/2/3 switch guidance-only,\n"
+      "mixed and reaction-only forces; s prints the status; q quits.");
   prev->add_option("OUT_DIR", pa->out, "output directory of `organsmith run`")->required();
   prev->add_option("--size", pa->size, "window size WIDTHxHEIGHT (default 1024x768)");
+  prev->add_option("--path", pa->path,
+                   "guidance path in OUT_DIR/paths (default: trachea_incision, else gallbladder_dissection, else "
+                   "trachea_centerline)");
+  prev->add_option("--mode", pa->mode, "starting mode: guidance, mixed (default) or reaction")
+      ->check(CLI::IsMember({"guidance", "mixed", "reaction"}));
+  prev->add_option("--rate", pa->rate_Hz, "haptic loop rate in Hz (default 1000)")->check(CLI::Range(10.0, 10000.0));
+  prev->add_option("--tool-radius-mm", pa->contact.tool_radius_mm, "radius of the tool tip sphere, mm (default 2)")
+      ->check(CLI::PositiveNumber);
   prev->add_option("--labels", pa->load.labels, "label map to draw when there are no meshes");
+  prev->add_option("--start", pa->start, "where the hand and tool start, LPS mm (x,y,z; default: beside the guidance path, else in front of the first organ)")
+      ->delimiter(',');
+  prev->add_option("--screenshot", pa->screenshot, "save the window as this PNG when it closes (with --quit-after: a picture for documents)");
   prev->add_option("--quit-after", pa->quit_after_s, "close the window after this many seconds (0 = never)")
       ->check(CLI::NonNegativeNumber);
-  commands.push_back({prev, [pa] { return cmd_preview(pa->out, pa->size, pa->quit_after_s, pa->load); }});
+  commands.push_back({prev, [pa] { return cmd_preview(*pa); }});
   return commands;
 }
 

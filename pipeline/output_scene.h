@@ -3,8 +3,10 @@
 // contours, meshes and paths (used by `organsmith snapshot`, `preview` and the run's snapshot
 // stage).
 
+#include "core/material.h"
 #include "core/progress.h"
 #include "core/volume.h"
+#include "physics/models.h"
 #include "viewer/scene.h"
 
 #include <filesystem>
@@ -32,7 +34,26 @@ struct LoadFlags {
   std::string ct, labels;
   bool need_ct = true;
   int context_step_vox = 2;  ///< in-plane sampling of the context surfaces (liver, lungs); 0 = none
+  /// Results of `organsmith calibrate` / `uncertainty --method mc` kept outside OUT_DIR, drawn as
+  /// plots (directories under OUT_DIR holding them are found by themselves).
+  std::vector<std::string> calibration_dirs;
+  bool plots = true;  ///< build the plots (material laws, Monte Carlo CDFs, calibration fits)
 };
+
+/// The calibrated law of an organ region ("gallbladder_body", "trachea_wall", …): from
+/// OUT/materials.json (the attach stage) when it has the region, else the built-in preset the
+/// region is assigned to. Throws InputError when materials.json is malformed or no law exists.
+struct RegionLaw {
+  Material material;
+  physics::ModelOptions options;
+  std::string preset_id;     ///< the preset it came from (as materials.json records it)
+  bool from_output = false;  ///< true: read from OUT/materials.json
+};
+RegionLaw region_law(const std::filesystem::path& out, const std::string& region);
+
+/// Volume of a surface's bounding box, mm³: the outermost of an organ's surfaces has the largest
+/// (its wall; a hollow wall encloses less volume than its lumen, so volume would not do).
+double outer_extent_mm3(const SurfaceMesh& mesh);
 
 /// Fills `os` from the output directory `out`; what is missing is listed in os.missing.
 void load_output_scene(const std::filesystem::path& out, const LoadFlags& flags, OutputScene& os,

@@ -15,8 +15,9 @@ struct RgbImage {
   const std::uint8_t* pixel(int x, int y) const { return rgb.data() + 3 * (std::size_t(y) * width_px + x); }
 };
 
-/// Writes `image` as a PNG (not atomic: write into a staging directory). Throws OutputError.
-void write_png(const RgbImage& image, const std::filesystem::path& path);
+/// Writes `image` as a PNG (not atomic: write into a staging directory); zlib level
+/// `compression_level` 0–9 (1: fastest, a few per cent larger). Throws OutputError.
+void write_png(const RgbImage& image, const std::filesystem::path& path, int compression_level = 5);
 /// Reads a PNG (RGB or RGBA; alpha dropped, grey expanded). Throws InputError.
 RgbImage read_png(const std::filesystem::path& path);
 

@@ -63,6 +63,9 @@ struct PlotSeries {
   std::vector<double> x, y;  ///< same length
   bool points = false;       ///< true: markers only (measurements); false: a line (fits, CDFs)
   Rgb colour{0.1, 0.3, 0.8};
+  bool dashed = false;       ///< lines only: dashed (bands, secondary curves)
+  bool in_legend = true;     ///< false: not listed (the second line of a band)
+  int marker = 0;            ///< points only: 0 circle, 1 square, 2 diamond, 3 cross, 4 plus
 };
 
 /// An XY chart (calibration fits, Monte Carlo CDFs). Axis labels carry units.
@@ -71,6 +74,9 @@ struct Plot {
   std::string title;
   std::string x_label, y_label;
   std::vector<PlotSeries> series;
+  std::string note;  ///< one line under the title: where the data come from
+  bool log_x = false;  ///< logarithmic x axis (positive values only; decade ticks)
+  bool log_y = false;  ///< logarithmic y axis (positive values only; decade ticks)
 };
 
 /// An organ to slice through: name and the label value that marks it in `labels`.

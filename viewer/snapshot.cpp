@@ -28,6 +28,7 @@
 #include <vtkProperty2D.h>
 #include <vtkRendererCollection.h>
 #include <vtkScalarBarActor.h>
+#include <vtkStringArray.h>
 #include <vtkTable.h>
 #include <vtkTextProperty.h>
 
@@ -35,6 +36,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <map>
 #include <set>
 
 namespace organsmith {
@@ -120,8 +122,33 @@ void add_legend(vtkRenderer* r, const std::vector<std::pair<std::string, Rgb>>& 
   const int font = std::max(11, vh / 42);
   const double line = font * 1.5, sw = font * 0.9;
   double y = vh - 0.03 * vh - font;
+  // Right-aligned block: the longest name (≈ 0.55 em per character) ends at the margin.
+  std::size_t longest = 0;
+  for (const auto& e : entries) longest = std::max(longest, e.first.size());
+  const double x = std::max(0.02 * vw, vw - 0.015 * vw - sw * 1.6 - 0.55 * font * double(longest));
+  if (!entries.empty()) {  // a pale backdrop keeps the names readable over surfaces and paths
+    const double x0 = x - 0.4 * font, x1 = vw - 0.005 * vw, y1 = y + sw + 0.4 * font,
+                 y0 = y - line * double(entries.size() - 1) - 0.4 * font;
+    auto pts = Ptr<vtkPoints>::New();
+    pts->InsertNextPoint(x0, y0, 0);
+    pts->InsertNextPoint(x1, y0, 0);
+    pts->InsertNextPoint(x1, y1, 0);
+    pts->InsertNextPoint(x0, y1, 0);
+    auto poly = Ptr<vtkCellArray>::New();
+    const vtkIdType q[4] = {0, 1, 2, 3};
+    poly->InsertNextCell(4, q);
+    auto pd = Ptr<vtkPolyData>::New();
+    pd->SetPoints(pts);
+    pd->SetPolys(poly);
+    auto m = Ptr<vtkPolyDataMapper2D>::New();
+    m->SetInputData(pd);
+    auto a = Ptr<vtkActor2D>::New();
+    a->SetMapper(m);
+    a->GetProperty()->SetColor(1, 1, 1);
+    a->GetProperty()->SetOpacity(0.8);
+    r->AddViewProp(a);
+  }
   for (const auto& [name, colour] : entries) {
-    const double x = vw - 0.27 * vw;
     auto pts = Ptr<vtkPoints>::New();
     pts->InsertNextPoint(x, y, 0);
     pts->InsertNextPoint(x + sw, y, 0);
@@ -188,6 +215,39 @@ Ptr<vtkActor> line_actor(vtkPolyData* pd, const Rgb& c, double width) {
   return a;
 }
 
+/// "0.01", "0.1", "1", "10", "100", "1 k", "10 k", "100 k", "1 M", … for 10^e.
+std::string decade_label(int e) {
+  static const char* suffix[] = {"", " k", " M", " G", " T"};
+  if (e < 0) {
+    std::string s = "0.";
+    for (int i = 1; i < -e; ++i) s += '0';
+    return s + "1";
+  }
+  const int group = std::min(e / 3, 4);
+  std::string s = "1";
+  for (int i = 0; i < e - 3 * group; ++i) s += '0';
+  return s + suffix[group];
+}
+
+/// Decade ticks (1, 10, 100, …) on an axis whose data are log10 of the values.
+void decade_ticks(vtkAxis* axis, const Plot& p, bool x_axis) {
+  double lo = 1e300, hi = -1e300;
+  for (const auto& sr : p.series)
+    for (const double v : x_axis ? sr.x : sr.y)
+      if (v > 0) lo = std::min(lo, std::log10(v)), hi = std::max(hi, std::log10(v));
+  if (!(hi >= lo)) return;
+  const int e0 = int(std::floor(lo)), e1 = int(std::ceil(hi));
+  auto pos = Ptr<vtkDoubleArray>::New();
+  auto labels = Ptr<vtkStringArray>::New();
+  for (int e = e0; e <= e1; ++e) {
+    pos->InsertNextValue(e);
+    labels->InsertNextValue(decade_label(e));
+  }
+  axis->SetCustomTickPositions(pos, labels);
+  axis->SetBehavior(vtkAxis::FIXED);
+  axis->SetRange(e0, e1);
+}
+
 }  // namespace
 
 ViewKind parse_view_kind(const std::string& name) {
@@ -229,6 +289,43 @@ struct SnapshotRenderer::Impl {
       throw UsageError("snapshot size " + std::to_string(o.width_px) + "x" + std::to_string(o.height_px) +
                            " is out of range", "use a size between 64x64 and 8192x8192");
     window = make_window(display.x_display(), o.width_px, o.height_px, /*offscreen=*/true);
+    window->SetNumberOfLayers(2);  // layer 1: guidance paths over the surfaces
+  }
+
+  /// VTK copies of the surfaces drawn so far (see SnapshotRenderer::forget_surfaces).
+  struct CachedSurface {
+    std::uint64_t fingerprint = 0;
+    Ptr<vtkPolyData> polydata;
+  };
+  std::map<const SurfaceMesh*, CachedSurface> surfaces;
+
+  static std::uint64_t fingerprint(const SceneSurface& s) {
+    std::uint64_t h = 1469598103934665603ull;
+    auto mix = [&h](const void* p, std::size_t n) {
+      const auto* b = static_cast<const unsigned char*>(p);
+      for (std::size_t i = 0; i < n; ++i) h = (h ^ b[i]) * 1099511628211ull;
+    };
+    const SurfaceMesh& m = s.mesh;
+    const std::size_t nv = m.vertices_lps_mm.size(), nt = m.triangles.size();
+    mix(&nv, sizeof nv);
+    mix(&nt, sizeof nt);
+    for (std::size_t k = 0; k < 64 && nv > 0; ++k) mix(m.vertices_lps_mm[k * (nv - 1) / 63].data(), 3 * sizeof(double));
+    for (std::size_t k = 0; k < 64 && nt > 0; ++k) mix(m.triangles[k * (nt - 1) / 63].data(), 3 * sizeof(std::int32_t));
+    for (const auto& [id, c] : s.region_colours) {
+      mix(&id, sizeof id);
+      mix(&c, sizeof c);
+    }
+    return h;
+  }
+
+  Ptr<vtkActor> cached_surface_actor(const SceneSurface& s) {
+    CachedSurface& c = surfaces[&s.mesh];
+    const std::uint64_t f = fingerprint(s);
+    if (!c.polydata || c.fingerprint != f) {
+      c.polydata = to_polydata(s.mesh, s.region_colours);
+      c.fingerprint = f;
+    }
+    return surface_actor(s, c.polydata);
   }
 
   void clear() {
@@ -245,18 +342,25 @@ struct SnapshotRenderer::Impl {
     std::set<std::string> sources;
     for (const auto& s : scene.surfaces) {
       if (overview ? false : (s.context || s.organ != organ)) continue;
-      r->AddViewProp(surface_actor(s));
+      r->AddViewProp(cached_surface_actor(s));
       triangles += s.mesh.triangles.size();
       if (!s.source.empty() && !s.context) sources.insert(s.source);
       legend.emplace_back(s.name + (s.context ? " (context)" : s.opacity < 1 ? " (translucent)" : ""), s.colour);
     }
+    std::vector<const ScenePath*> paths;
     for (const auto& p : scene.paths)
       if (overview || p.line.name.find(organ) != std::string::npos) {
-        r->AddViewProp(path_actor(p));
-        legend.emplace_back((p.line.name.empty() ? std::string("path") : p.line.name) + " (path)", p.colour);
+        paths.push_back(&p);
+        legend.emplace_back((p.line.name.empty() ? std::string("path") : p.line.name) + " (guidance path)", p.colour);
       }
     std::array<double, 6> b{};
-    const bool any = visible_bounds(r, b);
+    bool any = visible_bounds(r, b);
+    for (const auto* p : paths)
+      for (const auto& q : p->line.points_lps_mm) {
+        if (!any) b = {q.x(), q.x(), q.y(), q.y(), q.z(), q.z()}, any = true;
+        b = {std::min(b[0], q.x()), std::max(b[1], q.x()), std::min(b[2], q.y()),
+             std::max(b[3], q.y()), std::min(b[4], q.z()), std::max(b[5], q.z())};
+      }
     if (overview && scene.tool) {
       const double len = any ? 0.12 * std::max({b[1] - b[0], b[3] - b[2], b[5] - b[4]}) : 20.0;
       for (auto& p : tool_props(*scene.tool, len, Rgb{0.2, 0.75, 0.95})) r->AddViewProp(p);
@@ -269,8 +373,23 @@ struct SnapshotRenderer::Impl {
       fit_parallel_camera(r, b, anterior_view(30, 20), Eigen::Vector3d(0, 0, 1), double(L.w) / vh, 0.10);
       add_scale_bar(r, mm_per_px(r, vh), L.w, vh, kDarkText);
     }
-    add_legend(r, legend, L.w, vh, kDarkText);
-    r->AddViewProp(text("front view turned 30 deg to the patient's left, 20 deg from above; parallel projection",
+    // Paths as tubes at least ~5 px across, whatever the zoom, in a layer over the surfaces
+    // (sharing their camera): a centreline runs inside an opaque lumen.
+    // The legend goes in that layer too, over everything.
+    auto over = Ptr<vtkRenderer>::New();
+    over->SetLayer(1);
+    over->SetViewport(r->GetViewport());
+    over->SetActiveCamera(r->GetActiveCamera());
+    over->InteractiveOff();
+    const double px_mm = any ? mm_per_px(r, vh) : 0.0;
+    for (const auto* p : paths) {
+      ScenePath q = *p;
+      q.radius_mm = std::max(q.radius_mm, 2.5 * px_mm);
+      over->AddViewProp(path_actor(q));
+    }
+    add_legend(over, legend, L.w, vh, kDarkText);
+    r->AddViewProp(text(std::string("front view turned 30 deg to the patient's left, 20 deg from above; parallel projection") +
+                            (paths.empty() ? "" : "; paths drawn over the surfaces"),
                         std::max(10, vh / 52), kGreyText, L.w - 0.015 * L.w, 0.02 * vh, 2, 0));
     std::string src;
     for (const auto& s : sources) src += (src.empty() ? "" : ", ") + s;
@@ -281,6 +400,7 @@ struct SnapshotRenderer::Impl {
     if (!src.empty()) detail += "  |  surfaces: " + src;
     window->AddRenderer(title_band(L, title, detail, Rgb{1, 1, 1}, kDarkText, kGreyText));
     window->AddRenderer(r);
+    window->AddRenderer(over);
   }
 
   void view_slice(const SnapshotScene& scene, const SceneOrgan& organ, SliceAxis axis) {
@@ -506,8 +626,11 @@ struct SnapshotRenderer::Impl {
       y->SetName(sr.name.empty() ? "y" : sr.name.c_str());
       const std::size_t n = std::min(sr.x.size(), sr.y.size());
       for (std::size_t i = 0; i < n; ++i) {
-        x->InsertNextValue(sr.x[i]);
-        y->InsertNextValue(sr.y[i]);
+        // Logarithmic axes are drawn as log10 of the data on a linear axis with decade ticks
+        // (VTK 9.1's own log scale misplaces curves); non-positive values are left out there.
+        if ((p.log_x && !(sr.x[i] > 0)) || (p.log_y && !(sr.y[i] > 0))) continue;
+        x->InsertNextValue(p.log_x ? std::log10(sr.x[i]) : sr.x[i]);
+        y->InsertNextValue(p.log_y ? std::log10(sr.y[i]) : sr.y[i]);
       }
       table->AddColumn(x);
       table->AddColumn(y);
@@ -515,15 +638,21 @@ struct SnapshotRenderer::Impl {
       plot->SetInputData(table, 0, 1);
       plot->SetColor((unsigned char)std::lround(sr.colour.r * 255), (unsigned char)std::lround(sr.colour.g * 255),
                      (unsigned char)std::lround(sr.colour.b * 255), 255);
-      plot->SetWidth(sr.points ? 1.0f : 2.5f);
+      plot->SetWidth(sr.points ? 1.0f : sr.dashed ? 1.8f : 2.5f);
+      if (sr.dashed && !sr.points) plot->GetPen()->SetLineType(vtkPen::DASH_LINE);
+      plot->SetLegendVisibility(sr.in_legend);
       if (auto* pp = vtkPlotPoints::SafeDownCast(plot); pp && sr.points) {
-        pp->SetMarkerStyle(vtkPlotPoints::CIRCLE);
+        static const int styles[] = {vtkPlotPoints::CIRCLE, vtkPlotPoints::SQUARE, vtkPlotPoints::DIAMOND,
+                                     vtkPlotPoints::CROSS, vtkPlotPoints::PLUS};
+        pp->SetMarkerStyle(styles[std::clamp(sr.marker, 0, 4)]);
         pp->SetMarkerSize(8);
       }
       plot->SetLabel(sr.name);
     }
     chart->GetAxis(vtkAxis::BOTTOM)->SetTitle(p.x_label);
     chart->GetAxis(vtkAxis::LEFT)->SetTitle(p.y_label);
+    if (p.log_x) decade_ticks(chart->GetAxis(vtkAxis::BOTTOM), p, true);
+    if (p.log_y) decade_ticks(chart->GetAxis(vtkAxis::LEFT), p, false);
     for (int a : {vtkAxis::BOTTOM, vtkAxis::LEFT}) {
       chart->GetAxis(a)->GetTitleProperties()->SetFontSize(font);
       chart->GetAxis(a)->GetLabelProperties()->SetFontSize(font - 2);
@@ -539,7 +668,9 @@ struct SnapshotRenderer::Impl {
     std::size_t points = 0;
     for (const auto& sr : p.series) points += std::min(sr.x.size(), sr.y.size());
     window->AddRenderer(title_band(L, p.title.empty() ? p.name : p.title,
-                                   std::to_string(p.series.size()) + " series, " + std::to_string(points) + " points",
+                                   p.note.empty() ? std::to_string(p.series.size()) + " series, " +
+                                                        std::to_string(points) + " points"
+                                                  : p.note,
                                    Rgb{1, 1, 1}, kDarkText, kGreyText));
     window->AddRenderer(r);
   }
@@ -585,7 +716,7 @@ struct SnapshotRenderer::Impl {
     const auto t3 = Clock::now();
     clear();  // release the scene's buffers between views
     auto ms = [](auto a, auto b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
-    times = {ms(t0, t1), ms(t1, t2), ms(t2, t3)};
+    times = {ms(t0, t1), ms(t1, t2), ms(t2, t3), 0.0};
     return img;
   }
 };
@@ -599,8 +730,13 @@ RgbImage SnapshotRenderer::render(const SnapshotScene& scene, const std::string&
 
 void SnapshotRenderer::render_to_png(const SnapshotScene& scene, const std::string& name,
                                      const std::filesystem::path& png) {
-  write_png(render(scene, name), png);
+  const RgbImage img = render(scene, name);
+  const auto t0 = std::chrono::steady_clock::now();
+  write_png(img, png, impl_->opt.png_compression);
+  impl_->times.png_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
 }
+
+void SnapshotRenderer::forget_surfaces() { impl_->surfaces.clear(); }
 
 SnapshotRenderer::FrameTimes SnapshotRenderer::last_frame_times() const { return impl_->times; }
 

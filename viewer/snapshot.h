@@ -38,6 +38,7 @@ struct SnapshotOptions {
   double hu_window = 400.0;        ///< CT display window width, HU (default 400: soft tissue)
   double hu_level = 40.0;          ///< CT display window centre, HU (default 40)
   double closeup_min_mm = 90.0;    ///< smallest side of a slice close-up, mm (default 90)
+  int png_compression = 5;         ///< zlib level of the PNGs, 0–9 (default 5; 1 is faster, files ~5 % larger)
   DisplayOptions display;          ///< where to render (default: $DISPLAY, else a private Xvfb)
 };
 
@@ -66,11 +67,15 @@ class SnapshotRenderer {
   RgbImage render(const SnapshotScene& scene, const std::string& name);
   /// Renders view `name` and writes it as a PNG.
   void render_to_png(const SnapshotScene& scene, const std::string& name, const std::filesystem::path& png);
-  /// Where the last render() spent its time, in ms: building the VTK scene from core types,
-  /// drawing (upload and rasterisation), reading the pixels back.
+  /// Where the last render() / render_to_png() spent its time, in ms: building the VTK scene from
+  /// core types, drawing (upload and rasterisation), reading the pixels back, encoding the PNG.
   struct FrameTimes {
-    double build_ms = 0, draw_ms = 0, readback_ms = 0;
+    double build_ms = 0, draw_ms = 0, readback_ms = 0, png_ms = 0;
   };
+  /// Surfaces converted to VTK are kept for the next views (an organ is drawn in its own view and
+  /// in the overview). A surface is recognised by its address and a fingerprint of its size and
+  /// sampled vertices; forget_surfaces() drops them (e.g. after changing meshes in place).
+  void forget_surfaces();
   FrameTimes last_frame_times() const;
   /// The display this renderer draws through.
   const DisplaySession& display() const;

@@ -1,7 +1,8 @@
-// Snapshot cost: one 1024×768 view of a 1 M-triangle organ surface. The first frame pays for
-// the X window, the OpenGL context, shader compilation and the first upload; the acceptance
-// figure is the frames after it (budget 200 ms each: core types → VTK, normals, upload, draw,
-// read-back).
+// Snapshot cost: one 1024×768 PNG view of a 1 M-triangle organ surface. The first snapshot pays
+// for the X window, the OpenGL context, shader compilation and the first upload; the acceptance
+// figure is the snapshots after it (budget 200 ms each), measured cold (core types → VTK,
+// normals, upload, draw, read-back, PNG) and warm (the VTK copy of the surface kept from the
+// previous view, as when an organ appears in its own view and in the overview).
 
 #include "core/geometry.h"
 #include "viewer/snapshot.h"
@@ -12,6 +13,8 @@
 #include <cstdio>
 #include <cstdlib>
 #include <ctime>
+#include <filesystem>
+#include <string>
 #include <unistd.h>
 #include <vector>
 
@@ -61,6 +64,40 @@ double load1() {
 
 double ms_since(Clock::time_point t0) { return std::chrono::duration<double, std::milli>(Clock::now() - t0).count(); }
 
+struct Series {
+  std::vector<double> wall, cpu, build, draw, readback, png;
+  static double median(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return v.empty() ? 0.0 : (v[(v.size() - 1) / 2] + v[v.size() / 2]) / 2;
+  }
+};
+
+/// `n` snapshots (render + read-back + PNG) of view `name`; `cold`: the VTK copy of the surface
+/// is rebuilt each time (a new scene), else kept from the previous view (the normal case in a
+/// run: an organ is drawn in its own view and in the overview).
+Series measure(SnapshotRenderer& r, const SnapshotScene& scene, const std::string& name, bool cold, int n,
+               const std::filesystem::path& png, const char* label) {
+  Series s;
+  for (int i = 0; i < n; ++i) {
+    if (cold) r.forget_surfaces();
+    const auto t0 = Clock::now();
+    const double c0 = cpu_ms();
+    r.render_to_png(scene, name, png);
+    s.wall.push_back(ms_since(t0));
+    s.cpu.push_back(cpu_ms() - c0);
+    const auto f = r.last_frame_times();
+    s.build.push_back(f.build_ms), s.draw.push_back(f.draw_ms), s.readback.push_back(f.readback_ms),
+        s.png.push_back(f.png_ms);
+  }
+  std::printf("%-34s median %6.1f ms wall (min %.1f, max %.1f), %6.1f ms CPU | build %5.1f, draw %5.1f, read-back "
+              "%4.1f, PNG %5.1f ms (%zu bytes)\n",
+              label, Series::median(s.wall), *std::min_element(s.wall.begin(), s.wall.end()),
+              *std::max_element(s.wall.begin(), s.wall.end()), Series::median(s.cpu), Series::median(s.build),
+              Series::median(s.draw), Series::median(s.readback), Series::median(s.png),
+              std::size_t(std::filesystem::file_size(png)));
+  return s;
+}
+
 }  // namespace
 
 int main() {
@@ -72,41 +109,38 @@ int main() {
   s.mesh = lumpy_organ(1'000'000);
   s.source = "synthetic";
   scene.surfaces.push_back(std::move(s));
-  std::printf("scene: %zu triangles, %zu vertices; view 1024x768, MSAA off\n", scene.surfaces[0].mesh.triangles.size(),
-              scene.surfaces[0].mesh.vertices_lps_mm.size());
+  std::printf("scene: %zu triangles, %zu vertices; view 1024x768, MSAA off; a snapshot = render + read-back + PNG\n",
+              scene.surfaces[0].mesh.triangles.size(), scene.surfaces[0].mesh.vertices_lps_mm.size());
+  const std::filesystem::path png = std::filesystem::temp_directory_path() / "organsmith-bench-snapshot.png";
 
   SnapshotOptions o;  // 1024 × 768
   auto t0 = Clock::now();
   SnapshotRenderer renderer(o);
   const double open_ms = ms_since(t0);
   t0 = Clock::now();
-  RgbImage first = renderer.render(scene, "3d_liver");
+  renderer.render_to_png(scene, "3d_liver", png);
   const double first_ms = ms_since(t0);
   const auto ft = renderer.last_frame_times();
-  std::printf("first frame breakdown:   build %.1f ms, draw %.1f ms, read-back %.1f ms\n", ft.build_ms, ft.draw_ms,
-              ft.readback_ms);
-  std::vector<double> steady, cpu;
-  for (int i = 0; i < 10; ++i) {
-    t0 = Clock::now();
-    const double c0 = cpu_ms();
-    RgbImage img = renderer.render(scene, "3d_liver");
-    steady.push_back(ms_since(t0));
-    cpu.push_back(cpu_ms() - c0);
-    const auto f = renderer.last_frame_times();
-    std::printf("frame %2d: %6.1f ms wall, %6.1f ms CPU (all threads) (build %.1f, draw %.1f, read-back %.1f)\n", i + 1,
-                steady.back(), cpu.back(), f.build_ms, f.draw_ms, f.readback_ms);
-    if (img.rgb != first.rgb) std::printf("warning: frame %d differs from the first\n", i + 1);
-  }
-  std::sort(steady.begin(), steady.end());
-  std::sort(cpu.begin(), cpu.end());
-  const double median = (steady[4] + steady[5]) / 2;
-  std::printf("display + window:        %8.1f ms (%s)\n", open_ms,
+  std::printf("display + window:                  %8.1f ms (%s)\n", open_ms,
               renderer.display().private_xvfb() ? "private Xvfb started" : "existing display");
-  std::printf("first frame:             %8.1f ms (context, shaders, first upload)\n", first_ms);
-  std::printf("later frames (10):       median %.1f ms, min %.1f ms, max %.1f ms\n", median, steady.front(), steady.back());
-  std::printf("later frames CPU time:   median %.1f ms summed over the process's threads\n", (cpu[4] + cpu[5]) / 2);
-  std::printf("machine load (1 min):    %.2f on %ld cores (other processes share them)\n", load1(), sysconf(_SC_NPROCESSORS_ONLN));
-  std::printf("budget 200 ms:           median is %.2f x the budget -> %s\n", median / 200.0,
-              median <= 200.0 ? "within" : "OVER");
+  std::printf("first snapshot:                    %8.1f ms (context, shader compilation, first upload): build %.1f, "
+              "draw %.1f, read-back %.1f, PNG %.1f ms\n",
+              first_ms, ft.build_ms, ft.draw_ms, ft.readback_ms, ft.png_ms);
+  const RgbImage first = renderer.render(scene, "3d_liver");
+  constexpr int n = 10;
+  const Series warm = measure(renderer, scene, "3d_liver", false, n, png, "warm (surface kept), PNG level 5:");
+  const Series cold = measure(renderer, scene, "3d_liver", true, n, png, "cold (surface rebuilt), PNG level 5:");
+  SnapshotOptions fast = o;
+  fast.png_compression = 1;
+  SnapshotRenderer fast_renderer(fast);
+  fast_renderer.render_to_png(scene, "3d_liver", png);
+  const Series fast_warm = measure(fast_renderer, scene, "3d_liver", false, n, png, "warm, PNG level 1:");
+  if (renderer.render(scene, "3d_liver").rgb != first.rgb) std::printf("warning: a later frame differs from the first\n");
+  std::printf("machine load (1 min):              %.2f on %ld cores (other processes share them)\n", load1(),
+              sysconf(_SC_NPROCESSORS_ONLN));
+  const double median = Series::median(cold.wall);
+  std::printf("budget 200 ms per snapshot after the first: cold %.1f ms (%s), warm %.1f ms, warm with PNG level 1 %.1f ms\n",
+              median, median <= 200.0 ? "within" : "OVER", Series::median(warm.wall), Series::median(fast_warm.wall));
+  std::filesystem::remove(png);
   return median <= 200.0 ? 0 : 1;
 }

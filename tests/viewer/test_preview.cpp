@@ -15,6 +15,8 @@
 #include <sys/wait.h>
 
 #include <chrono>
+#include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <optional>
 #include <thread>
@@ -112,7 +114,26 @@ void keep_shot(const RgbImage& img, const std::string& name) {
 
 }  // namespace
 
-TEST(Preview, MouseMovesTheToolAndKeysSwitchTheMode) {
+/// Pixels of `img` within `tol` of colour c in the rectangle [x0, x1) × [y0, y1).
+std::size_t colour_pixels(const RgbImage& img, const Rgb& c, int tol, int x0, int y0, int x1, int y1) {
+  const int r = int(std::lround(c.r * 255)), g = int(std::lround(c.g * 255)), b = int(std::lround(c.b * 255));
+  std::size_t n = 0;
+  for (int y = y0; y < y1; ++y)
+    for (int x = x0; x < x1; ++x) {
+      const std::uint8_t* p = img.pixel(x, y);
+      n += (std::abs(p[0] - r) <= tol && std::abs(p[1] - g) <= tol && std::abs(p[2] - b) <= tol) ? 1 : 0;
+    }
+  return n;
+}
+
+/// The value of `key=` in a status line (numbers only).
+double field(const std::string& line, const std::string& key) {
+  const auto at = line.find(" " + key + "=");
+  if (at == std::string::npos) return std::nan("");
+  return std::atof(line.c_str() + at + key.size() + 2);
+}
+
+TEST(Preview, MouseMovesTheToolKeysSwitchTheModeAndGuidancePullsTheTool) {
   XTest xtest;
   ASSERT_TRUE(xtest.ok()) << "libXtst.so.6 (Debian package libxtst6) is needed to inject X input events";
   DisplayOptions dopt;
@@ -122,18 +143,25 @@ TEST(Preview, MouseMovesTheToolAndKeysSwitchTheMode) {
 
   ScratchDir out("viewer-preview");
   fs::copy(small_phantom_dir(), out / "phantom", fs::copy_options::recursive);
+  // A guidance path for the loop: the trachea centreline of the phantom's labels.
+  const CliResult guide = run_cli("guide '" + out.path().string() + "' --path trachea_centerline");
+  ASSERT_EQ(guide.exit_code, 0) << guide.output;
   const std::string title = "organsmith preview";
   const std::string cmd = "DISPLAY=" + session.name() + " exec '" + std::string(ORGANSMITH_CLI) + "' preview '" +
                           out.path().string() + "' --size 800x600 --quit-after 120 2>&1";
   FILE* proc = popen(cmd.c_str(), "r");
   ASSERT_NE(proc, nullptr);
   std::string log;
-  char line[1024];
-  while (fgets(line, sizeof line, proc)) {
-    log += line;
-    if (log.find("preview: ready") != std::string::npos) break;
-  }
-  ASSERT_NE(log.find("preview: ready"), std::string::npos) << log;
+  char line[2048];
+  auto read_until = [&](const std::string& prefix) -> std::string {
+    while (fgets(line, sizeof line, proc)) {
+      log += line;
+      if (std::string(line).rfind(prefix, 0) == 0) return line;
+    }
+    return {};
+  };
+  ASSERT_FALSE(read_until("preview: ready").empty()) << log;
+  EXPECT_NE(log.find("guidance path: trachea_centerline"), std::string::npos) << log;
 
   Window w = 0;
   for (int i = 0; i < 100 && !w; ++i) {
@@ -155,39 +183,82 @@ TEST(Preview, MouseMovesTheToolAndKeysSwitchTheMode) {
     xtest.key(d, code, False, 0);
     XFlush(d);
   };
+  auto settle = [] { std::this_thread::sleep_for(std::chrono::milliseconds(700)); };
+  // The mode label: top left, in the mode's colour (green, yellow, red-orange).
+  const Rgb guidance_colour{0.45, 1.0, 0.45}, mixed_colour{1.0, 0.85, 0.2}, reaction_colour{1.0, 0.45, 0.35};
+  auto label_pixels = [&](const RgbImage& img, const Rgb& c) { return colour_pixels(img, c, 12, 0, 0, 400, 60); };
 
-  // The pointer enters at the centre: the tool jumps there; settle, then take the first shot.
+  // Reaction only (3): away from tissue the tool is where the hand is and follows the pointer.
+  // (Keys go to the window under the pointer: Xvfb runs no window manager.)
   move(400, 300);
   move(401, 300);
-  std::this_thread::sleep_for(std::chrono::milliseconds(500));
+  press(XK_3);
+  settle();
   const RgbImage before = screenshot(d, w);
-  keep_shot(before, "preview_before.png");
+  keep_shot(before, "preview_reaction_before.png");
   ASSERT_EQ(before.width_px, 800);
   ASSERT_EQ(before.height_px, 600);
   std::size_t n_before = 0, n_after = 0;
   const auto c0 = tool_centroid(before, n_before);
   ASSERT_TRUE(c0) << "tool not visible before the motion";
+  EXPECT_GT(label_pixels(before, reaction_colour), 100u) << "no reaction-only label";
+  EXPECT_LT(label_pixels(before, mixed_colour), 10u);
 
-  // Drag the pointer (no button) to the upper right, then press 3.
+  // Drag the pointer (no button) to the upper right.
   for (int i = 1; i <= 10; ++i) move(400 + 18 * i, 300 - 10 * i);
-  press(XK_3);
-  std::this_thread::sleep_for(std::chrono::milliseconds(600));
+  settle();
   const RgbImage after = screenshot(d, w);
-  keep_shot(after, "preview_after.png");
+  keep_shot(after, "preview_reaction_after.png");
   const auto c1 = tool_centroid(after, n_after);
   ASSERT_TRUE(c1) << "tool not visible after the motion";
-  const double dx = c1->first - c0->first, dy = c1->second - c0->second;
   // The pointer moved 180 px right and 100 px up; the tool follows in the screen plane.
-  EXPECT_GT(dx, 120.0) << "tool did not follow the pointer to the right";
-  EXPECT_LT(dy, -60.0) << "tool did not follow the pointer upwards";
-  // The mode label (top left) changed; the bottom right corner (help text) did not.
-  EXPECT_GT(differing_pixels(before, after, 0, 0, 400, 60), 200u);
-  EXPECT_LT(differing_pixels(before, after, 560, 560, 800, 600), 20u);
+  EXPECT_GT(c1->first - c0->first, 120.0) << "tool did not follow the pointer to the right";
+  EXPECT_LT(c1->second - c0->second, -60.0) << "tool did not follow the pointer upwards";
+  press(XK_s);
+  const std::string reaction = read_until("preview: status");
+  ASSERT_FALSE(reaction.empty()) << log;
+  EXPECT_NE(reaction.find("mode=reaction"), std::string::npos) << reaction;
+  EXPECT_GT(field(reaction, "loop_Hz"), 0.0) << reaction;
+  const double hand_path = field(reaction, "hand_path_mm");
+  ASSERT_GT(hand_path, 5.0) << "the hand should be away from the centreline here: " << reaction;
+  if (field(reaction, "contact") == 0.0)  // no tissue: nothing pulls the tool off the hand
+    EXPECT_NEAR(field(reaction, "tool_path_mm"), hand_path, 0.5) << reaction;
+
+  // Guidance only (1): the hand stays, the path pulls the tool toward it; the label changes.
+  press(XK_1);
+  settle();
+  press(XK_s);
+  const std::string guided = read_until("preview: status");
+  ASSERT_FALSE(guided.empty()) << log;
+  EXPECT_NE(guided.find("mode=guidance"), std::string::npos) << guided;
+  EXPECT_NEAR(field(guided, "hand_path_mm"), hand_path, 0.5) << "the hand moved by itself: " << guided;
+  EXPECT_LT(field(guided, "tool_path_mm"), hand_path - 2.0) << "guidance did not pull the tool: " << guided;
+  EXPECT_GT(field(guided, "force_N"), 0.1) << guided;
+  const RgbImage guidance_shot = screenshot(d, w);
+  keep_shot(guidance_shot, "preview_guidance.png");
+  EXPECT_GT(label_pixels(guidance_shot, guidance_colour), 100u) << "no guidance-only label";
+  EXPECT_LT(label_pixels(guidance_shot, reaction_colour), 10u) << "the reaction-only label is still there";
+  EXPECT_GT(differing_pixels(after, guidance_shot, 0, 0, 400, 60), 200u);
+  // The force arrow (red) is drawn while guidance pulls.
+  EXPECT_GT(colour_pixels(guidance_shot, Rgb{0.95, 0.15, 0.12}, 60, 0, 60, 800, 540), 30u) << "no force arrow";
+
+  // Mixed (2).
+  press(XK_2);
+  settle();
+  const RgbImage mixed_shot = screenshot(d, w);
+  keep_shot(mixed_shot, "preview_mixed.png");
+  EXPECT_GT(label_pixels(mixed_shot, mixed_colour), 100u) << "no mixed label";
+  EXPECT_LT(label_pixels(mixed_shot, guidance_colour), 10u);
 
   press(XK_q);
   while (fgets(line, sizeof line, proc)) log += line;
   const int status = pclose(proc);
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << log;
-  EXPECT_NE(log.find("preview: mode 3 reaction only"), std::string::npos) << log;
-  EXPECT_NE(log.find("preview: quit"), std::string::npos) << log;
+  for (const char* e : {"preview: mode 3 reaction only", "preview: mode 1 guidance only", "preview: mode 2 mixed",
+                        "preview: quit"})
+    EXPECT_NE(log.find(e), std::string::npos) << e << "\n" << log;
+  const auto ticks_at = log.find(" ticks");
+  ASSERT_NE(ticks_at, std::string::npos) << log;
+  const auto num_at = log.rfind(", ", ticks_at);
+  EXPECT_GT(std::atof(log.c_str() + num_at + 2), 1000.0) << "the haptic loop hardly ran: " << log;
 }

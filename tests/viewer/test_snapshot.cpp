@@ -10,6 +10,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <fstream>
 #include <iterator>
 
@@ -165,4 +166,65 @@ TEST(SnapshotCli, WritesWhatExistsAndSaysWhatIsMissing) {
 
   EXPECT_EQ(run_cli("snapshot '" + out.path().string() + "' --size 12by7").exit_code, 2);
   EXPECT_EQ(run_cli("snapshot '" + (out / "absent").string() + "'").exit_code, 3);
+}
+
+namespace {
+
+void write_text(const fs::path& p, const std::string& text) {
+  fs::create_directories(p.parent_path());
+  std::ofstream(p) << text;
+}
+
+}  // namespace
+
+TEST(SnapshotCli, PlotsTheMaterialsCalibrationFitsAndMonteCarloResults) {
+  ScratchDir out("viewer-plots");
+  // The attach stage's materials.json (one region), a `calibrate` result and an `uncertainty
+  // --method mc` result in subdirectories.
+  write_text(out / "materials.json", R"({"regions": {"gallbladder_wall": {"preset": "fung-wall/table-5.1.1/mean",
+    "model": "fung-wall", "constants": {}, "source": "test",
+    "parameters": [{"name": "c", "value": 19.11, "unit": "Pa"}, {"name": "a1", "value": 17.06, "unit": "1"},
+                   {"name": "a2", "value": 18.25, "unit": "1"}, {"name": "a4", "value": 6.59, "unit": "1"}]}}})");
+  std::string fit = "specimen,load,stretch,lateral_stretch,stress_pa,model_stress_pa,residual_pa\n";
+  for (int i = 1; i <= 20; ++i)
+    for (const char* load : {"uniaxial-circumferential", "uniaxial-longitudinal"}) {
+      const double l = 1 + 0.015 * i, k = load[9] == 'c' ? 6.0 : 9.0, m = 20.0 * (std::exp(k * (l - 1)) - 1);
+      fit += std::string("s1,") + load + "," + std::to_string(l) + ",1," + std::to_string(m * 1.03) + "," +
+             std::to_string(m) + "," + std::to_string(0.03 * m) + "\n";
+    }
+  write_text(out / "calibration" / "fit_a" / "fit.csv", fit);
+  write_text(out / "calibration" / "fit_a" / "params.json",
+             R"({"model": "fung-wall", "points": 40, "r2": 0.99, "rmse": 3.2, "data": "/somewhere/wall.csv"})");
+  std::string cdf = "stretch,probability,stress_pa\n";
+  for (const double s : {1.2, 1.4})
+    for (int i = 0; i <= 100; ++i)
+      cdf += std::to_string(s) + "," + std::to_string(i / 100.0) + "," + std::to_string((s - 1) * 1e4 * (0.5 + i / 100.0)) + "\n";
+  write_text(out / "calibration" / "mc_b" / "cdf.csv", cdf);
+  write_text(out / "calibration" / "mc_b" / "summary.json",
+             R"({"method": "monte-carlo", "preset": "p", "samples": 100, "spread": "sd"})");
+
+  const CliResult r = run_cli("snapshot '" + out.path().string() + "' --views plots --size 640x480");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const fs::path snaps = out / "snapshots";
+  for (const std::string name : {"plot_materials", "plot_mc_gallbladder_wall", "plot_fit_fit_a", "plot_cdf_mc_b"}) {
+    SCOPED_TRACE(name);
+    ASSERT_TRUE(fs::exists(snaps / (name + ".png"))) << r.output;
+    const RgbImage img = read_png(snaps / (name + ".png"));
+    EXPECT_EQ(img.width_px, 640);
+    EXPECT_GT(grey_variance(img), 100.0);
+  }
+  // The fit: measured and fitted series of both load cases, in the first two series colours
+  // (blue, orange); nothing else is drawn in orange.
+  const RgbImage fit_png = read_png(snaps / "plot_fit_fit_a.png");
+  EXPECT_GT(count_hue(fit_png, Rgb{0.0, 0.45, 0.70}), 300u) << "circumferential series missing";
+  EXPECT_GT(count_hue(fit_png, Rgb{0.84, 0.37, 0.0}), 300u) << "longitudinal series missing";
+  // The materials plot: the law and its band (one region: one colour).
+  const RgbImage laws = read_png(snaps / "plot_materials.png");
+  EXPECT_GT(count_hue(laws, Rgb{0.0, 0.45, 0.70}), 300u);
+  EXPECT_LT(count_hue(laws, Rgb{0.84, 0.37, 0.0}), 50u);
+
+  // A named calibration directory that does not exist is an input error.
+  EXPECT_EQ(run_cli("snapshot '" + out.path().string() + "' --views plots --calibration '" +
+                    (out / "nope").string() + "'").exit_code,
+            2);  // CLI11 rejects a missing directory as a usage error
 }

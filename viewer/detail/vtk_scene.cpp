@@ -30,6 +30,9 @@
 #include <vtkUnsignedCharArray.h>
 #include <vtkXOpenGLRenderWindow.h>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 #include <cmath>
 #include <cstdio>
 
@@ -94,14 +97,21 @@ Ptr<vtkPolyData> to_polydata(const SurfaceMesh& mesh, const std::map<std::int32_
   pd->SetPolys(cells);
 
   if (normals && nv > 0) {
+    // Face normals in parallel, then summed per vertex in triangle order (the same sums, in the
+    // same order, on every run: the PNGs stay byte-identical).
+    std::vector<Eigen::Vector3f> face(static_cast<std::size_t>(nt));
+    tbb::parallel_for(tbb::blocked_range<vtkIdType>(0, nt, 16384), [&](const tbb::blocked_range<vtkIdType>& r) {
+      for (vtkIdType t = r.begin(); t < r.end(); ++t) {
+        const auto& tri = mesh.triangles[std::size_t(t)];
+        const Eigen::Vector3f a(p + 3 * std::size_t(tri[0]));
+        const Eigen::Vector3f e1 = Eigen::Vector3f(p + 3 * std::size_t(tri[1])) - a;
+        const Eigen::Vector3f e2 = Eigen::Vector3f(p + 3 * std::size_t(tri[2])) - a;
+        face[std::size_t(t)] = e1.cross(e2);  // length = 2 × area: area weighting for free
+      }
+    });
     std::vector<Eigen::Vector3f> n(nv, Eigen::Vector3f::Zero());
-    for (const auto& tri : mesh.triangles) {
-      const Eigen::Vector3f a = mesh.vertices_lps_mm[tri[0]].cast<float>();
-      const Eigen::Vector3f e1 = mesh.vertices_lps_mm[tri[1]].cast<float>() - a;
-      const Eigen::Vector3f e2 = mesh.vertices_lps_mm[tri[2]].cast<float>() - a;
-      const Eigen::Vector3f fn = e1.cross(e2);  // length = 2 × area: area weighting for free
-      for (int c = 0; c < 3; ++c) n[tri[c]] += fn;
-    }
+    for (vtkIdType t = 0; t < nt; ++t)
+      for (int c = 0; c < 3; ++c) n[mesh.triangles[std::size_t(t)][c]] += face[std::size_t(t)];
     auto arr = Ptr<vtkFloatArray>::New();
     arr->SetName("normals");
     arr->SetNumberOfComponents(3);
@@ -181,8 +191,13 @@ Ptr<vtkUnstructuredGrid> to_grid(const TetMesh& mesh, const std::vector<std::int
   return grid;
 }
 
-Ptr<vtkActor> surface_actor(const SceneSurface& s) {
+Ptr<vtkActor> surface_actor(const SceneSurface& s, Ptr<vtkPolyData>* polydata) {
   auto pd = to_polydata(s.mesh, s.region_colours);
+  if (polydata) *polydata = pd;
+  return surface_actor(s, pd.Get());
+}
+
+Ptr<vtkActor> surface_actor(const SceneSurface& s, vtkPolyData* pd) {
   auto mapper = Ptr<vtkPolyDataMapper>::New();
   mapper->SetInputData(pd);
   if (pd->GetCellData()->GetScalars()) {
@@ -225,9 +240,6 @@ Ptr<vtkActor> path_actor(const ScenePath& p) {
   return actor;
 }
 
-namespace {
-
-/// Transform that maps +x of a VTK source to `dir`, scaled by `length`, placed at `origin`.
 Ptr<vtkTransform> along(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, double length, double width) {
   const Eigen::Vector3d x = dir.normalized();
   Eigen::Vector3d helper = std::abs(x.z()) < 0.9 ? Eigen::Vector3d(0, 0, 1) : Eigen::Vector3d(1, 0, 0);
@@ -241,6 +253,8 @@ Ptr<vtkTransform> along(const Eigen::Vector3d& origin, const Eigen::Vector3d& di
   t->SetMatrix(m);
   return t;
 }
+
+namespace {
 
 Ptr<vtkActor> transformed(vtkAlgorithm* source, vtkTransform* t, const Rgb& colour) {
   auto f = Ptr<vtkTransformPolyDataFilter>::New();

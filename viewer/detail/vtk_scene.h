@@ -14,6 +14,7 @@
 #include <vtkRenderer.h>
 #include <vtkSmartPointer.h>
 #include <vtkTextActor.h>
+#include <vtkTransform.h>
 #include <vtkUnstructuredGrid.h>
 
 #include <array>
@@ -36,8 +37,15 @@ Ptr<vtkPolyData> to_polydata(const Polyline& line);
 /// Tets with a "quality" cell array (3 r_in / R_circ, 1 = regular).
 Ptr<vtkUnstructuredGrid> to_grid(const TetMesh& mesh, const std::vector<std::int32_t>& keep);
 
-Ptr<vtkActor> surface_actor(const SceneSurface& s);
+/// The surface's actor (region colours, opacity, back faces culled); `polydata`, when given,
+/// receives the data drawn (the preview moves its points).
+Ptr<vtkActor> surface_actor(const SceneSurface& s, Ptr<vtkPolyData>* polydata = nullptr);
+/// The same with the data already converted (to_polydata of s.mesh and s.region_colours).
+Ptr<vtkActor> surface_actor(const SceneSurface& s, vtkPolyData* polydata);
 Ptr<vtkActor> path_actor(const ScenePath& p);
+/// Transform that maps +x of a VTK source to `dir`, scaled by `length` (and by `width` across),
+/// placed at `origin`.
+Ptr<vtkTransform> along(const Eigen::Vector3d& origin, const Eigen::Vector3d& dir, double length, double width);
 /// Tip sphere and shaft (length_mm), coloured `colour`; arrow for the force when given.
 std::vector<Ptr<vtkProp>> tool_props(const SceneTool& tool, double length_mm, const Rgb& colour);
 
