@@ -23,6 +23,7 @@ organsmith_require(embree libembree-dev 3)
 organsmith_require(VTK libvtk9-dev 9.1
   COMPONENTS CommonCore CommonDataModel IOXML RenderingCore RenderingOpenGL2
              InteractionStyle RenderingFreeType IOImage RenderingAnnotation ChartsCore RenderingContext2D RenderingContextOpenGL2 FiltersCore FiltersGeneral FiltersSources FiltersGeometry)
+organsmith_require(PNG libpng-dev)
 organsmith_require(CLI11 libcli11-dev)
 organsmith_require(nlohmann_json nlohmann-json3-dev)
 organsmith_require(spdlog libspdlog-dev)

@@ -9,6 +9,10 @@
 #include "pipeline/commands.h"
 #include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
+#include "viewer/display.h"
+#include "viewer/snapshot.h"
+
+#include <spdlog/spdlog.h>
 
 #include <nlohmann/json.hpp>
 
@@ -42,6 +46,7 @@ struct DegradeFlags {
   int elements = 0;
   double max_increase = 0.05;
   bool print_clip = false;
+  bool snapshots = true;
 };
 
 /// One stage as VTK XML PolyData (ASCII): one line cell per element, clip frame in mm (z = 0).
@@ -92,6 +97,121 @@ std::string stage_vtp(const ClipModel& m, const ClipSnapshot* s, const std::stri
   x << "        </DataArray>\n      </Lines>\n    </Piece>\n  </PolyData>\n"
     << "  <!-- " << title << " -->\n</VTKFile>\n";
   return x.str();
+}
+
+/// The clip's centroid curve in a state as plot lines: one series per run of intact elements
+/// (broken elements leave gaps), the first named, the rest unlisted.
+void add_clip_series(std::vector<PlotSeries>& out, const ClipModel& m, const ClipSnapshot* s, const std::string& name,
+                     Rgb colour, bool dashed) {
+  const ClipGeometry& g = m.geometry();
+  auto node = [&](int n) { return s ? Eigen::Vector2d(s->q.segment<2>(2 * n)) : g.nodes_mm[n]; };
+  PlotSeries cur;
+  bool named = false;
+  auto flush = [&] {
+    if (cur.x.size() >= 2) {
+      cur.name = name;
+      cur.colour = colour;
+      cur.dashed = dashed;
+      cur.in_legend = !named;
+      named = true;
+      out.push_back(cur);
+    }
+    cur = PlotSeries{};
+  };
+  for (int e = 0; e < g.elements(); ++e) {
+    if (s && s->fractured[e]) {
+      flush();
+      continue;
+    }
+    if (cur.x.empty()) cur.x.push_back(node(e).x()), cur.y.push_back(node(e).y());
+    cur.x.push_back(node(e + 1).x());
+    cur.y.push_back(node(e + 1).y());
+  }
+  flush();
+}
+
+/// The pictures of a simulation: each stage as in thesis Fig. 6.8 (original shape green, the
+/// previous stage red, the current one blue; broken elements left out), the initial strain-energy
+/// map along the clip (Fig. 6.3) and the mass-remaining curve (Fig. 6.7).
+std::vector<Plot> degradation_plots(const ClipModel& m, const DegradationResult& r, double load_n, double tau_d) {
+  const Rgb green{0.15, 0.6, 0.2}, red{0.85, 0.15, 0.1}, blue{0.1, 0.3, 0.85};
+  // Plain "tau_D": the snapshot font has no Greek letters.
+  const std::string note = "load " + num(load_n) + " N, tau_D " + num(tau_d) + " " + kTauUnitName +
+                           "; clip frame (x across the wound, y out of the tissue)";
+  std::vector<Plot> plots;
+  const ClipSnapshot* previous = &r.initial;
+  for (std::size_t k = 0; k < r.stages.size(); ++k) {
+    const ClipSnapshot& cur = r.stages[k];
+    Plot p;
+    char stem[64];
+    std::snprintf(stem, sizeof stem, "degradation_stage_%zu", k + 1);
+    p.name = stem;
+    p.title = "Clip degradation, stage " + std::to_string(k + 1) + ": day " + num(cur.t_days) + " (" +
+              num(cur.t_days / 7.0) + " weeks)";
+    p.note = note;
+    p.x_label = "x (mm)";
+    p.y_label = "y (mm)";
+    add_clip_series(p.series, m, nullptr, "original shape", green, true);
+    add_clip_series(p.series, m, previous, "previous stage (day " + num(previous->t_days) + ")", red, false);
+    add_clip_series(p.series, m, &cur, "this stage", blue, false);
+    plots.push_back(std::move(p));
+    previous = &cur;
+  }
+  {
+    const ClipGeometry& g = m.geometry();
+    Plot p;
+    p.name = "degradation_energy";
+    p.title = "Strain energy along the deployed clip (t = 0)";
+    p.note = note;
+    p.x_label = "arc length from the left leg tip (mm)";
+    p.y_label = std::string("E* (") + kEnergyDensityUnitName + ")";
+    p.log_y = true;
+    PlotSeries e;
+    e.name = "E* per element";
+    e.colour = red;
+    double arc = 0;
+    for (int i = 0; i < g.elements(); ++i) {
+      const double len = (g.nodes_mm[i + 1] - g.nodes_mm[i]).norm();
+      e.x.push_back(arc + 0.5 * len);
+      e.y.push_back(std::max(r.initial.energies.density[i], 1e-6));
+      arc += len;
+    }
+    p.series.push_back(std::move(e));
+    plots.push_back(std::move(p));
+  }
+  {
+    Plot p;
+    p.name = "degradation_mass";
+    p.title = "Mass remaining";
+    p.note = note;
+    p.x_label = "time (days)";
+    p.y_label = "mass remaining (fraction)";
+    PlotSeries mass;
+    mass.name = "model";
+    mass.colour = blue;
+    for (const auto& s : r.steps) mass.x.push_back(s.t_days), mass.y.push_back(s.mass_fraction);
+    p.series.push_back(std::move(mass));
+    plots.push_back(std::move(p));
+  }
+  return plots;
+}
+
+/// Renders `plots` into dir/snapshots/plot_<name>.png. Without any display (no X server and no
+/// Xvfb) the pictures are skipped with a warning: the numbers are the result.
+void write_plot_pngs(const std::vector<Plot>& plots, const fs::path& dir) {
+  SnapshotScene scene;
+  scene.case_name = "degradation";
+  scene.plots = plots;
+  SnapshotOptions so;
+  so.views = {ViewKind::plots};
+  fs::create_directories(dir / "snapshots");
+  NullProgress quiet;
+  try {
+    render_snapshots(scene, so, dir / "snapshots", quiet);
+  } catch (const DisplayError& e) {
+    fs::remove_all(dir / "snapshots");
+    spdlog::warn("pictures skipped: {}", e.what());
+  }
 }
 
 void write_text(const fs::path& p, const std::string& text) {
@@ -223,6 +343,7 @@ int run_simulate(const DegradeFlags& f) {
       write_text(dir / st[k + 1]["file"].get<std::string>(),
                  stage_vtp(model, &r.stages[k], "t = " + num(r.stages[k].t_days) + " days"));
     write_text(dir / "mass.csv", csv.str());
+    if (f.snapshots) write_plot_pngs(degradation_plots(model, r, f.load_n, f.tau_d), dir);
     write_text(dir / "summary.json", j.dump(2) + "\n");
   });
   std::cout << "clip " << p.name << " (" << g.elements() << " elements) under " << num(f.load_n) << " N, τ_D "
@@ -281,6 +402,27 @@ int run_fit(const DegradeFlags& f) {
     write_text(dir / "fit.json", j.dump(2) + "\n");
     write_text(dir / "fit.csv", csv.str());
     write_text(dir / "model_mass.csv", curve_csv.str());
+    if (f.snapshots) {
+      Plot p;
+      p.name = "degradation_fit";
+      p.title = "Mass remaining: measured and fitted (tau_D " + num(fit.tau_d) + ")";
+      p.note = fs::path(f.fit).filename().string() + ", load " + num(f.load_n) + " N; R² " + num(fit.r2) + ", RMSE " +
+               num(fit.rmse);
+      p.x_label = "time (days)";
+      p.y_label = "mass remaining (fraction)";
+      PlotSeries measured;
+      measured.name = "measured";
+      measured.points = true;
+      measured.colour = {0.1, 0.1, 0.1};
+      measured.x = data.t_days;
+      measured.y = data.mass_fraction;
+      PlotSeries model_line;
+      model_line.name = "model";
+      model_line.colour = {0.85, 0.15, 0.1};
+      for (const auto& s : curve.steps) model_line.x.push_back(s.t_days), model_line.y.push_back(s.mass_fraction);
+      p.series = {measured, model_line};
+      write_plot_pngs({p}, dir);
+    }
   });
   std::cout << "τ_D = " << num(fit.tau_d) << " " << kTauUnitName << " from " << data.t_days.size() << " points: R² "
             << num(fit.r2) << ", RMSE " << num(fit.rmse) << (fit.at_bound ? " (at the search bound)" : "") << "\n"
@@ -311,6 +453,8 @@ std::vector<Command> degradation_commands(CLI::App& app) {
   cmd->add_option("--max-increase", f->max_increase,
                   "--fit: largest rise of mass_fraction over an earlier row accepted as weighing noise (default 0.05)")
       ->check(CLI::Range(0.0, 1.0));
+  cmd->add_flag("!--no-snapshots", f->snapshots,
+                "do not render DIR/snapshots/*.png (stages as in thesis Fig. 6.8, energy map, mass curve)");
   cmd->add_flag("--print-clip", f->print_clip, "print the embedded clip preset (a starting point for --clip) and exit");
   return {{cmd, [f] {
              if (f->print_clip) return run_print_clip();

@@ -52,12 +52,22 @@ TEST(DegradeCli, WritesStagesMassAndSummaryByteIdentically) {
   std::string log;
   ASSERT_EQ(run("degrade --out " + q(s.dir / "a") + " --elements 60", &log), 0) << log;
   ASSERT_EQ(run("degrade --out " + q(s.dir / "b") + " --elements 60", &log), 0) << log;
-  std::size_t files = 0;
-  for (const auto& e : fs::directory_iterator(s.dir / "a")) {
+  std::size_t files = 0, pngs = 0;
+  for (const auto& e : fs::recursive_directory_iterator(s.dir / "a")) {
+    if (!e.is_regular_file()) continue;
     ++files;
-    EXPECT_EQ(slurp(e.path()), slurp(s.dir / "b" / e.path().filename())) << e.path().filename();
+    const fs::path rel = fs::relative(e.path(), s.dir / "a");
+    const std::string bytes = slurp(e.path());
+    EXPECT_TRUE(bytes == slurp(s.dir / "b" / rel)) << rel << " differs between two runs";
+    if (e.path().extension() == ".png") {
+      ++pngs;
+      EXPECT_EQ(bytes.rfind("\x89PNG", 0), 0u) << rel;
+    }
   }
-  EXPECT_EQ(files, 9u);  // original, 6 stages, mass.csv, summary.json
+  // original, 6 stages, mass.csv, summary.json; pictures: 5 stages (Fig. 6.8), energy map, mass.
+  EXPECT_EQ(files, 16u);
+  EXPECT_EQ(pngs, 7u);
+  EXPECT_TRUE(fs::exists(s.dir / "a" / "snapshots" / "plot_degradation_stage_5.png"));
   const auto j = nlohmann::json::parse(slurp(s.dir / "a" / "summary.json"));
   ASSERT_EQ(j["stages"].size(), 6u);
   EXPECT_EQ(j["stages"][1]["previous"], "stage_0_0.0w.vtp");
