@@ -161,6 +161,8 @@ void validate(const LoopOptions& o) {
   if (!(o.step_mm_per_N >= 0) || !std::isfinite(o.step_mm_per_N)) throw UsageError("the descent step α must be non-negative (mm/N)");
   if (!positive(o.max_step_mm)) throw UsageError("the largest tool step must be positive (mm)");
   if (o.timing_capacity < 1) throw UsageError("the timing capacity must be at least 1 tick");
+  if (!(o.spin_us >= 0) || o.spin_us * 1e-6 * o.rate_Hz > 0.5)
+    throw UsageError("the spin before each tick must be non-negative and at most half a period (µs)");
 }
 
 HapticLoop::HapticLoop(HapticDevice& device, const PathIndex* path, const ContactModel* contact, const LoopOptions& options)
@@ -292,8 +294,11 @@ void HapticLoop::run() noexcept {
   clock::time_point first_wake{}, last_wake{};
   std::uint64_t n = 0;
   const std::size_t cap = compute_us_.size();
+  const auto spin = std::chrono::duration_cast<clock::duration>(std::chrono::duration<double, std::micro>(options_.spin_us));
   while (!stop_requested_.load(std::memory_order_acquire)) {
-    std::this_thread::sleep_until(next);
+    std::this_thread::sleep_until(next - spin);
+    while (clock::now() < next) {
+    }
     const auto wake = clock::now();
     const double t_s = std::chrono::duration<double>(wake - start).count();
     if (device_.finished(t_s)) break;
