@@ -12,6 +12,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <optional>
 #include <fstream>
@@ -116,7 +117,12 @@ SolverMaterial solver_material(const std::string& region, const std::map<std::st
     // tangent (S = c·a·E for W = c/2 (e^Q − 1)) gives the initial stiffness of an equivalent
     // nearly incompressible neo-Hookean solid.
     const double E = *par("c") * 0.5 * (*par("a1") + *par("a2"));
-    if (warnings) warnings->push_back(region + ": " + m.model + " written as its zero-strain neo-Hookean equivalent (E = " + num(E * 1e6) + " Pa); the solvers have no matching Fung form");
+    if (warnings) {
+      char e_pa[32];
+      std::snprintf(e_pa, sizeof e_pa, "%.4g", E * 1e6);
+      warnings->push_back(region + ": " + m.model + " written as its zero-strain neo-Hookean equivalent (E = " + e_pa +
+                          " Pa); the solvers have no matching Fung form");
+    }
     return neo_hooke(E, 0.49, "zero-strain neo-Hookean equivalent of " + original);
   }
   if (par("E")) return neo_hooke(*par("E"), par("v").value_or(0.45), "from " + original);

@@ -207,7 +207,7 @@ class Runner {
     const OrganMeshes meshes = mesh_organs(labels, options, progress_);
     for (const auto& w : meshes.warnings) spdlog::warn("mesh: {}", w);
     for (const auto& organ : meshes.organs) {
-      for (const auto& w : organ.warnings) spdlog::warn("mesh: {}: {}", organ.spec.name, w);
+      for (const auto& w : organ.warnings) spdlog::warn("mesh: {}", w);  // each names its organ
       for (const auto& f : organ.volume_quality.failures)
         spdlog::warn("mesh: {}: tetrahedral quality gate not met: {}", organ.spec.name, f);
       for (const auto& surf : organ.surfaces)
