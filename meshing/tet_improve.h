@@ -12,7 +12,8 @@ struct TetImproveStats {
   int flips = 0;  ///< 2-3 and 3-2 flips taken
 };
 
-/// Moves interior vertices (not on the boundary nor on a region interface) of tetrahedra whose
+/// Moves interior vertices (boundary and region-interface vertices only tangentially, a tenth of
+/// an edge at most, and not on creases) of tetrahedra whose
 /// smallest dihedral angle is below `min_dihedral_deg` or whose radius-edge ratio exceeds
 /// `max_radius_edge`, to the position of a few candidates (star centroid, pattern search) that
 /// most improves the worst tet of their star; flips (2-3, 3-2) inside a region where that

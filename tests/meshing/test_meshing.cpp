@@ -66,14 +66,15 @@ void expect_guarantees(const NamedSurface& s) {
 
 /// The tetrahedral quality gate. The project asks for a smallest dihedral angle ≥ 10° and a
 /// radius-edge ratio ≤ 2 on every tet; CGAL Mesh_3 (perturb to 8°, exude to 12°) followed by
-/// organsmith's local vertex repair, 2-3/3-2 flips and boundary peeling reaches that for all but
-/// ≈ 0.1 % of the tets, whose four vertices lie on the boundary or on the wall/body interface.
-/// The bounds below hold the figures reached (phantom: 8.04°, 2.83) — NOT the issue's
-/// thresholds; raise them to 10° / 2 once the remaining tets are fixed.
+/// organsmith's local repair (interior vertex moves, tangential slides of smooth boundary and
+/// interface vertices, 2-3/3-2 flips, boundary peeling) reaches that for all but ≈ 0.05 % of the
+/// tets. The bounds below hold the figures reached (phantom gallbladder 8.43°, 2.33; trachea
+/// 10.2°, 2.03; real references 9.15°, 2.38) — NOT the thresholds; raise them to 10° / 2
+/// once the remaining tets are fixed.
 void expect_tet_gate_as_reached(const TetQuality& q) {
   EXPECT_EQ(q.inverted_or_flat, 0);
-  EXPECT_GE(q.dihedral_min_deg, 8.0);
-  EXPECT_LE(q.radius_edge_max, 3.0);
+  EXPECT_GE(q.dihedral_min_deg, 8.2);
+  EXPECT_LE(q.radius_edge_max, 2.5);
   EXPECT_LE(double(q.below_min_dihedral + q.above_max_radius_edge), 0.003 * double(q.tets))
       << q.below_min_dihedral << " tets below 10°, " << q.above_max_radius_edge << " above radius-edge 2";
 }
