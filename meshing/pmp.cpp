@@ -206,11 +206,35 @@ SurfaceMesh repair_and_remesh(const SurfaceMesh& in, const RemeshParams& p, std:
     auto vconstrained = m.add_property_map<V, bool>("v:constrained", false).first;
     for (E e : m.edges())
       if (constrained[e]) vconstrained[m.vertex(e, 0)] = vconstrained[m.vertex(e, 1)] = true;
-    PMP::angle_and_area_smoothing(m, CGAL::parameters::number_of_iterations(2)
-                                         .use_area_smoothing(false)
-                                         .use_Delaunay_flips(false)
-                                         .do_project(true)
-                                         .vertex_is_constrained_map(vconstrained));
+    // Angle smoothing: the whole surface once (it evens out the edge lengths too), then only
+    // around triangles near the angle bound (two rings of faces) — smoothing all of it every
+    // pass cost most of this function's time.
+    std::vector<F> near_bad;
+    if (pass == 0) {
+      for (F f : m.faces()) near_bad.push_back(f);
+    } else {
+      auto mark = m.add_property_map<F, bool>("f:near_bad", false).first;
+      std::vector<F> ring;
+      for (F f : m.faces())
+        if (face_min_angle(m, f) < p.min_angle_deg + 5.0) ring.push_back(f), mark[f] = true;
+      for (int r = 0; r < 2; ++r) {
+        std::vector<F> next;
+        for (F f : ring)
+          for (H h : CGAL::halfedges_around_face(m.halfedge(f), m))
+            for (F g : CGAL::faces_around_target(h, m))
+              if (g != Mesh::null_face() && !mark[g]) mark[g] = true, next.push_back(g);
+        ring.swap(next);
+      }
+      for (F f : m.faces())
+        if (mark[f]) near_bad.push_back(f);
+      m.remove_property_map(mark);
+    }
+    if (!near_bad.empty())
+      PMP::angle_and_area_smoothing(near_bad, m, CGAL::parameters::number_of_iterations(2)
+                                                   .use_area_smoothing(false)
+                                                   .use_Delaunay_flips(false)
+                                                   .do_project(true)
+                                                   .vertex_is_constrained_map(vconstrained));
     if (changes == 0) break;
   }
   (void)reference;

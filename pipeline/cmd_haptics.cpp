@@ -11,6 +11,7 @@
 #include "physics/paths.h"
 #include "physics/presets.h"
 #include "pipeline/commands.h"
+#include "pipeline/output_scene.h"
 #include "pipeline/guide_stage.h"
 #include "pipeline/image_io.h"
 #include "pipeline/runner.h"
@@ -113,44 +114,13 @@ struct HapticsFlags {
 
 /// The calibrated law of an organ region, from OUT_DIR/materials.json (the attach stage), else the
 /// built-in preset of that region.
+/// The organ region's law as a stress lookup table (the same law the preview and snapshots use).
 StressTable region_table(const fs::path& out, const std::string& region) {
-  Material m;
-  ModelOptions mo;
-  const fs::path mf = out / "materials.json";
-  bool found = false;
-  if (fs::exists(mf)) {
-    std::ifstream in(mf);
-    nlohmann::json j;
-    try {
-      j = nlohmann::json::parse(in);
-    } catch (const nlohmann::json::exception& e) {
-      throw InputError(ExitCode::unsupported_input, std::string("materials.json is not valid JSON: ") + e.what(), mf,
-                       "rerun the attach stage (`organsmith run --force`)");
-    }
-    if (j.contains("regions") && j["regions"].contains(region)) {
-      const auto& r = j["regions"][region];
-      try {
-        m.model = r.at("model").get<std::string>();
-        for (const auto& p : r.at("parameters"))
-          m.parameters.push_back({p.at("name").get<std::string>(), p.at("value").get<double>(), p.value("unit", "")});
-        if (r.contains("constants") && r["constants"].contains("bulk_modulus_Pa"))
-          mo.bulk_modulus_Pa = r["constants"]["bulk_modulus_Pa"].get<double>();
-      } catch (const nlohmann::json::exception& e) {
-        throw InputError(ExitCode::unsupported_input, "region " + region + " of materials.json is malformed: " + e.what(), mf);
-      }
-      found = true;
-    }
-  }
-  if (!found) {
-    const MaterialLibrary lib = builtin_material_library();
-    const auto it = lib.regions.find(region);
-    if (it == lib.regions.end()) throw InputError(ExitCode::unsupported_input, "no material for region " + region, mf);
-    const MaterialPreset& preset = lib.find(it->second);
-    m = preset.material;
-    mo = model_options_for(preset);
-    spdlog::warn("haptics: {} not in {}; using the built-in preset {}", region, mf.string(), preset.id);
-  }
-  return StressTable::from_material(m, mo, 0.6);
+  const RegionLaw law = region_law(out, region);
+  if (!law.from_output)
+    spdlog::warn("haptics: {} not in {}; using the built-in preset {}", region, (out / "materials.json").string(),
+                 law.preset_id);
+  return StressTable::from_material(law.material, law.options, 0.6);
 }
 
 nlohmann::json percentiles_json(const Percentiles& p) {
