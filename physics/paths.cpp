@@ -478,7 +478,10 @@ DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap
     by_label = liver->count(o.liver_label) > 0;
     if (by_label) {
       out.bed_source = "liver label";
-      const Eigen::Vector3d r = (Eigen::Vector3d::Constant(o.bed_distance_mm).cwiseQuotient(g.spacing_mm)).array().ceil();
+      // Liver voxel centres lie up to about a voxel from the surface that touches them: on coarse
+      // grids the reach grows with the voxel diagonal.
+      const double reach_mm = std::max(o.bed_distance_mm, 0.75 * g.spacing_mm.norm());
+      const Eigen::Vector3d r = (Eigen::Vector3d::Constant(reach_mm).cwiseQuotient(g.spacing_mm)).array().ceil();
       for (std::size_t i = 0; i < V.size(); ++i) {
         const Eigen::Vector3d x = g.lps_mm_to_index(V[i]);
         const Eigen::Vector3i c(int(std::lround(x.x())), int(std::lround(x.y())), int(std::lround(x.z())));
@@ -486,16 +489,20 @@ DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap
           for (int j = c.y() - int(r.y()); j <= c.y() + int(r.y()) && !bed[i]; ++j)
             for (int ii = c.x() - int(r.x()); ii <= c.x() + int(r.x()); ++ii) {
               if (!g.contains(ii, j, k) || liver->at(ii, j, k) != o.liver_label) continue;
-              if ((g.index_to_lps_mm(Eigen::Vector3d(ii, j, k)) - V[i]).norm() <= o.bed_distance_mm) {
+              if ((g.index_to_lps_mm(Eigen::Vector3d(ii, j, k)) - V[i]).norm() <= reach_mm) {
                 bed[i] = 1;
                 break;
               }
             }
       }
+      if (std::find(bed.begin(), bed.end(), char(1)) == bed.end()) {
+        by_label = false;  // the liver label does not touch this surface: use the direction
+        out.bed_source = "surface facing the liver direction (the liver label does not touch the gallbladder)";
+      }
     }
   }
   if (!by_label) {
-    out.bed_source = "surface facing the liver direction";
+    if (out.bed_source.empty()) out.bed_source = "surface facing the liver direction";
     std::vector<Eigen::Vector3d> vn(V.size(), Eigen::Vector3d::Zero());
     for (const auto& t : gb.triangles) {
       const Eigen::Vector3d n = (V[t[1]] - V[t[0]]).cross(V[t[2]] - V[t[0]]);

@@ -101,7 +101,7 @@ struct DissectionOptions {
 
 struct DissectionPath {
   Polyline line;                  ///< closed: the rim of the liver bed on the gallbladder surface
-  std::string bed_source;         ///< "liver label" or "surface facing the liver direction"
+  std::string bed_source;         ///< "liver label", or "surface facing the liver direction" (with the reason when a liver label was given but does not touch the surface)
   double bed_area_mm2 = 0.0;      ///< area of the gallbladder surface in the bed
   double max_surface_distance_mm = 0.0;
 };
