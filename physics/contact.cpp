@@ -304,13 +304,16 @@ std::optional<RayHit> SurfaceIndex::first_hit(const Eigen::Vector3d& origin, con
   return h;
 }
 
-int SurfaceIndex::crossings(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction) const noexcept {
+int SurfaceIndex::crossings(const Eigen::Vector3d& origin, const Eigen::Vector3d& direction,
+                            double* first_hit_mm) const noexcept {
   int n = 0;
   Eigen::Vector3d o = origin;
   const Eigen::Vector3d d = direction.normalized();
+  if (first_hit_mm) *first_hit_mm = std::numeric_limits<double>::infinity();
   for (int guard = 0; guard < 10000; ++guard) {
     const auto h = first_hit(o, d);
     if (!h) break;
+    if (n == 0 && first_hit_mm) *first_hit_mm = h->t_mm;
     ++n;
     o = o + (h->t_mm + 1e-4) * d;
   }
@@ -392,10 +395,14 @@ ContactSample ContactModel::evaluate(const Eigen::Vector3d& q) const noexcept {
   ClosestPoint cp = index_.closest(q, r);
   if (!cp.found) {
     // Nothing within reach: either outside and out of contact, or sunk deeper than r. Parity of
-    // the crossings of one ray tells which; only then are wider balls searched.
-    if (index_.crossings(q, Eigen::Vector3d(0.5773502691896258, 0.5773502691896258, 0.5773502691896258)) % 2 == 0)
+    // the crossings of one ray tells which.
+    double hit_mm = 0;
+    if (index_.crossings(q, Eigen::Vector3d(0.5773502691896258, 0.5773502691896258, 0.5773502691896258), &hit_mm) % 2 == 0)
       return c;
-    for (double reach = 2 * r + options_.search_margin_mm; !cp.found; reach *= 4)
+    // Inside: the ray's first crossing bounds the distance to the surface, so one ball of that
+    // radius holds the closest point (a wider one only if rounding lost it).
+    for (double reach = std::isfinite(hit_mm) ? hit_mm * (1 + 1e-6) + 1e-4 : 2 * r + options_.search_margin_mm; !cp.found;
+         reach *= 4)
       cp = index_.closest(q, reach > 1e6 ? std::numeric_limits<double>::infinity() : reach);
     cp.signed_distance_mm = -std::abs(cp.signed_distance_mm);
   }

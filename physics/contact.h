@@ -67,7 +67,10 @@ class SurfaceIndex {
   std::optional<RayHit> first_hit(const Eigen::Vector3d& origin_lps_mm, const Eigen::Vector3d& direction,
                                   double max_t_mm = std::numeric_limits<double>::infinity()) const noexcept;
   /// Number of surface crossings along the ray (inside/outside by parity, for tests).
-  int crossings(const Eigen::Vector3d& origin_lps_mm, const Eigen::Vector3d& direction) const noexcept;
+  /// `first_hit_mm`, when given, receives the distance to the first crossing (infinity without
+  /// one): an upper bound of the distance from the origin to the surfaces.
+  int crossings(const Eigen::Vector3d& origin_lps_mm, const Eigen::Vector3d& direction,
+                double* first_hit_mm = nullptr) const noexcept;
 
   std::size_t surface_count() const;
   const SurfaceMesh& surface(std::size_t i) const;
