@@ -37,6 +37,13 @@ std::string num(double v) {
   return buf;
 }
 
+/// Four significant digits, for what the terminal shows (files keep full precision).
+std::string show(double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.4g", v);
+  return buf;
+}
+
 struct DegradeFlags {
   std::string out, clip, fit;
   double load_n = 5.0;
@@ -348,12 +355,12 @@ int run_simulate(const DegradeFlags& f) {
   });
   std::cout << "clip " << p.name << " (" << g.elements() << " elements) under " << num(f.load_n) << " N, τ_D "
             << num(f.tau_d) << " " << kTauUnitName << "\n"
-            << "  deployment: max displacement " << num(r.max_displacement_mm) << " mm, max bending stress "
-            << num(r.max_bending_stress_MPa) << " MPa (yield " << num(p.yield_min_MPa) << "–" << num(p.yield_max_MPa)
+            << "  deployment: max displacement " << show(r.max_displacement_mm) << " mm, max bending stress "
+            << show(r.max_bending_stress_MPa) << " MPa (yield " << num(p.yield_min_MPa) << "–" << num(p.yield_max_MPa)
             << " MPa; the model is elastic)\n"
-            << "  mass remaining after " << num(f.weeks) << " weeks: " << num(100 * r.steps.back().mass_fraction) << " %\n";
+            << "  mass remaining after " << num(f.weeks) << " weeks: " << show(100 * r.steps.back().mass_fraction) << " %\n";
   if (r.load_released_day >= 0)
-    std::cout << "  the clip stopped holding the wound on day " << num(r.load_released_day) << " (a leg broke)\n";
+    std::cout << "  the clip stopped holding the wound on day " << show(r.load_released_day) << " (a leg broke)\n";
   if (!r.all_converged) std::cout << "  warning: some minimisations did not reach the force tolerance (see mass.csv residual_N)\n";
   std::cout << "wrote " << out.string() << "\n";
   return 0;
@@ -424,8 +431,8 @@ int run_fit(const DegradeFlags& f) {
       write_plot_pngs({p}, dir);
     }
   });
-  std::cout << "τ_D = " << num(fit.tau_d) << " " << kTauUnitName << " from " << data.t_days.size() << " points: R² "
-            << num(fit.r2) << ", RMSE " << num(fit.rmse) << (fit.at_bound ? " (at the search bound)" : "") << "\n"
+  std::cout << "τ_D = " << show(fit.tau_d) << " " << kTauUnitName << " from " << data.t_days.size() << " points: R² "
+            << show(fit.r2) << ", RMSE " << show(fit.rmse) << (fit.at_bound ? " (at the search bound)" : "") << "\n"
             << "wrote " << out.string() << "\n";
   return 0;
 }

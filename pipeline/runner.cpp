@@ -589,7 +589,7 @@ std::vector<std::string> write_guidance_paths(const fs::path& out_dir, const fs:
     }
     const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, options.dissection);
     spdlog::info("guide: gallbladder liver bed from the {}{}", d.bed_source,
-                 liver && liver != &labels ? " of the phantom ground truth" : "");
+                 d.bed_source == "liver label" && liver != &labels ? " of the phantom ground truth" : "");
     emit(d.line, {{"bed_area_mm2", d.bed_area_mm2},
                   {"bed_from_liver_label", d.bed_source == "liver label" ? 1.0 : 0.0},
                   {"max_surface_distance_mm", d.max_surface_distance_mm}});
