@@ -238,6 +238,9 @@ struct Anatomy {
   double trachea_sway_phase = 0.0;
   double bronchus_wall = 1.8;
   std::array<Tube, 6> bronchi{};  // lumen radii
+  /// Depth where the main bronchi's lumens part in the axial slice: the true carina (the lumen
+  /// divides there). Air above it is trachea (label 2), below it bronchus (lungs, label 4).
+  double divide_d = 170.0;
 
   // Lungs and diaphragm.
   double apex_d = 70.0;
@@ -309,6 +312,29 @@ Anatomy make_anatomy(std::uint64_t seed) {
       {l1, l1 + 20.0 * normalized({0.9, -0.2, -0.3}), 4.5, 4.0},  // left upper lobe
       {l1, l1 + 40.0 * normalized({0.3, 0.3, 0.9}), 5.0, 4.0},    // left lower lobe
   }};
+  // The main bronchi start 4 mm above carina_d and overlap for a while: the single lumen they
+  // form is still trachea. It divides at the first depth where the segment between the two
+  // axes, in the axial slice, leaves both lumens.
+  a.divide_d = a.carina_d;
+  {
+    const Tube& right = a.bronchi[0];
+    const Tube& left = a.bronchi[3];
+    auto axis_at = [](const Tube& t, double d) {
+      const double s = std::clamp((d - t.a.d) / (t.b.d - t.a.d), 0.0, 1.0);
+      return t.a + s * (t.b - t.a);
+    };
+    for (double d = a.carina_d; d < a.carina_d + 40.0; d += 0.1) {
+      const V3 pr = axis_at(right, d), pl = axis_at(left, d);
+      bool joined = true;
+      for (int k = 0; k <= 40 && joined; ++k) {
+        const V3 p = pr + (k / 40.0) * (pl - pr);
+        const V3 q{p.x, p.y, d};
+        joined = right.excess(q) < 0.0 || left.excess(q) < 0.0;
+      }
+      if (!joined) break;
+      a.divide_d = d;
+    }
+  }
 
   // Ascending aorta, arch passing left of the trachea, descending beside the spine.
   const std::array<V3, 8> aorta_path{{{8.0, -40.0, 240.0},
@@ -608,8 +634,8 @@ std::optional<Tissue> Model::airway(const SliceContext& s, const RowContext& r, 
   double e = std::numeric_limits<double>::infinity();
   for (int i = 0; i < s.bronchus_count; ++i)
     e = std::min(e, a_.bronchi[std::size_t(s.bronchi[std::size_t(i)])].excess(p));
-  // Bronchi belong to the lungs (label 4): only the trachea above the carina is label 2.
-  if (e < 0.0) return Tissue{hu::air, Label::lungs};
+  // Bronchi belong to the lungs (label 4); their shared lumen above the division is trachea.
+  if (e < 0.0) return Tissue{hu::air, s.d <= a_.divide_d ? Label::trachea : Label::lungs};
   if (e < a_.bronchus_wall)
     return Tissue{hu::airway_wall, lung_region(s, r, x) ? Label::lungs : Label::body};
   return std::nullopt;
