@@ -334,17 +334,16 @@ TetImproveStats improve_tets(TetMesh& m, double min_dih, double max_re) {
     stats.peeled_tets += peeled;
   }
 
-  // Drop vertices no tet uses any more.
+  // Drop vertices no tet uses any more (peeled tets can leave some), keeping the others' order.
+  std::vector<char> used(nv, 0);
+  for (const auto& T : m.tets)
+    for (auto v : T) used[v] = 1;
   std::vector<std::int32_t> remap(nv, -1);
   std::vector<Eigen::Vector3d> vertices;
+  for (std::size_t v = 0; v < nv; ++v)
+    if (used[v]) remap[v] = std::int32_t(vertices.size()), vertices.push_back(m.vertices_lps_mm[v]);
   for (auto& T : m.tets)
-    for (auto& v : T) {
-      if (remap[v] < 0) {
-        remap[v] = std::int32_t(vertices.size());
-        vertices.push_back(m.vertices_lps_mm[v]);
-      }
-      v = remap[v];
-    }
+    for (auto& v : T) v = remap[v];
   m.vertices_lps_mm.swap(vertices);
   return stats;
 }

@@ -17,6 +17,7 @@
 #include <cstdlib>
 #include <fstream>
 #include <map>
+#include <random>
 #include <set>
 #include <sstream>
 
@@ -197,6 +198,69 @@ TEST_F(PhantomMeshes, TetrahedraArePositiveAndMeetTheQualityGate) {
     for (std::size_t t = 0; t < organ.volume.tets.size(); ++t) ASSERT_GT(organ.volume.tet_volume_mm3(t), 0.0);
     expect_tet_gate_as_reached(q);
   }
+}
+
+TEST(TetRepair, RepairKeepsFacesFlatEdgesStraightAndTheVolume) {
+  // A 6×6×6 block of cubes (1 mm), each split into 6 tets around its main diagonal, with every
+  // vertex jittered: interior ones in 3D, face vertices within their face, edge and corner
+  // vertices not at all. The repair may move interior vertices anywhere and face vertices only
+  // within their face (the block's faces are flat: a tangential slide must leave them there);
+  // edges and corners are creases and must stay put.
+  const int n = 6;
+  TetMesh m;
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> jitter(-0.3, 0.3);
+  auto id = [&](int i, int j, int k) { return std::int32_t(i + (n + 1) * (j + (n + 1) * k)); };
+  std::vector<int> on_faces;  // how many of the block's faces each vertex lies on
+  for (int k = 0; k <= n; ++k)
+    for (int j = 0; j <= n; ++j)
+      for (int i = 0; i <= n; ++i) {
+        const int c[3] = {i, j, k};
+        Eigen::Vector3d p(i, j, k);
+        int faces = 0;
+        for (int a = 0; a < 3; ++a) faces += (c[a] == 0 || c[a] == n);
+        for (int a = 0; a < 3; ++a)
+          if (!(c[a] == 0 || c[a] == n) && faces <= 1) p[a] += jitter(rng);
+        m.vertices_lps_mm.push_back(p);
+        on_faces.push_back(faces);
+      }
+  static const int kCube[6][4] = {{0, 1, 3, 7}, {0, 3, 2, 7}, {0, 2, 6, 7}, {0, 6, 4, 7}, {0, 4, 5, 7}, {0, 5, 1, 7}};
+  for (int k = 0; k < n; ++k)
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        std::int32_t c[8];
+        for (int b = 0; b < 8; ++b) c[b] = id(i + (b & 1), j + ((b >> 1) & 1), k + ((b >> 2) & 1));
+        for (const auto& t : kCube) {
+          std::array<std::int32_t, 4> tet{c[t[0]], c[t[1]], c[t[2]], c[t[3]]};
+          m.tets.push_back(tet);
+          if (m.tet_volume_mm3(m.tets.size() - 1) < 0) std::swap(m.tets.back()[2], m.tets.back()[3]);
+          m.region_ids.push_back(1);
+        }
+      }
+  for (std::size_t t = 0; t < m.tets.size(); ++t) ASSERT_GT(m.tet_volume_mm3(t), 0.0) << "set-up";
+  const TetMesh before = m;
+  TetGuarantees g;
+  const TetQuality q0 = measure_tets(m, g);
+  ASSERT_GT(q0.below_min_dihedral + q0.above_max_radius_edge, 0) << "the set-up must start below the gate";
+
+  const auto stats = meshing_detail::improve_tets(m, 10.0, 2.0);
+  EXPECT_GT(stats.moved_vertices, 0);
+  EXPECT_EQ(stats.peeled_tets, 0) << "a block's tets have at most one face on its boundary";
+  ASSERT_EQ(m.vertices_lps_mm.size(), before.vertices_lps_mm.size());
+  for (std::size_t v = 0; v < m.vertices_lps_mm.size(); ++v) {
+    const Eigen::Vector3d &p = m.vertices_lps_mm[v], &p0 = before.vertices_lps_mm[v];
+    if (on_faces[v] >= 2) {
+      EXPECT_EQ(p, p0) << "edge or corner vertex " << v << " moved";
+    } else if (on_faces[v] == 1) {
+      for (int a = 0; a < 3; ++a)
+        if (p0[a] == 0.0 || p0[a] == double(n)) EXPECT_NEAR(p[a], p0[a], 1e-12) << "face vertex " << v << " left its face";
+    }
+  }
+  for (std::size_t t = 0; t < m.tets.size(); ++t) EXPECT_GT(m.tet_volume_mm3(t), 0.0);
+  EXPECT_NEAR(m.volume_mm3(), double(n * n * n), 1e-9);
+  const TetQuality q1 = measure_tets(m, g);
+  EXPECT_LT(q1.below_min_dihedral + q1.above_max_radius_edge, q0.below_min_dihedral + q0.above_max_radius_edge);
+  EXPECT_GE(q1.dihedral_min_deg, q0.dihedral_min_deg);
 }
 
 TEST(TetRepair, FlipReplacesTwoFlatTetsByThreeBetterOnesKeepingVolumeAndBoundary) {
