@@ -1,6 +1,8 @@
 // `organsmith guide` and `organsmith haptics` as a user runs them, on a small phantom run:
 // the paths it writes, a replayed trajectory in each mode, and bad input.
 
+#include "../pipeline/test_support.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
@@ -9,23 +11,12 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-#include <sys/wait.h>
 #include <unistd.h>
 
 namespace fs = std::filesystem;
+using organsmith::testing::run_cli;
 
 namespace {
-
-int run(const std::string& args, std::string* out = nullptr) {
-  const std::string cmd = std::string("'") + ORGANSMITH_CLI + "' " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string text;
-  char buf[4096];
-  while (std::size_t n = std::fread(buf, 1, sizeof buf, p)) text.append(buf, n);
-  const int status = pclose(p);
-  if (out) *out = text;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
 
 std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 
@@ -49,7 +40,7 @@ class HapticsCli : public ::testing::Test {
     std::ofstream(dir_ / "small.toml") << "[case]\nname = \"small-phantom\"\ninput = \"phantom\"\n\n"
                                           "[phantom]\nsize = 160\nslice_mm = 2.5\n\n"
                                           "[[organ]]\nname = \"gallbladder\"\n\n[[organ]]\nname = \"trachea\"\n";
-    setup_rc_ = run("run " + q(dir_ / "small.toml") + " --out " + q(dir_ / "out") + " --until guide", &setup_log_);
+    setup_rc_ = run_cli("run " + q(dir_ / "small.toml") + " --out " + q(dir_ / "out") + " --until guide", &setup_log_);
   }
   static void TearDownTestSuite() { fs::remove_all(dir_); }
 
@@ -111,7 +102,7 @@ TEST_F(HapticsCli, GuidanceFollowsThePathBetterThanReactionAndForcesStayClamped)
     SCOPED_TRACE(modes[m]);
     const fs::path report = dir_ / (std::string("report_") + modes[m] + ".json");
     std::string log;
-    ASSERT_EQ(run("haptics " + q(dir_ / "out") + " --trajectory " + q(traj) + " --mode " + modes[m] + " --out " +
+    ASSERT_EQ(run_cli("haptics " + q(dir_ / "out") + " --trajectory " + q(traj) + " --mode " + modes[m] + " --out " +
                       q(report) + " --offline --force-limit-n 2",
                   &log),
               0)
@@ -131,19 +122,19 @@ TEST_F(HapticsCli, GuidanceFollowsThePathBetterThanReactionAndForcesStayClamped)
 TEST_F(HapticsCli, BadTrajectoriesAndMissingSurfacesAreClearErrors) {
   std::string log;
   std::ofstream(dir_ / "nan.csv") << "t_s,x,y,z\n0,0,0,0\n0.001,nan,0,0\n";
-  EXPECT_EQ(run("haptics " + q(dir_ / "out") + " --trajectory " + q(dir_ / "nan.csv") + " --out " + q(dir_ / "r_nan.json"), &log), 18) << log;
+  EXPECT_EQ(run_cli("haptics " + q(dir_ / "out") + " --trajectory " + q(dir_ / "nan.csv") + " --out " + q(dir_ / "r_nan.json"), &log), 18) << log;
   EXPECT_NE(log.find("line 3"), std::string::npos) << log;
   EXPECT_FALSE(fs::exists(dir_ / "r_nan.json"));
 
   std::ofstream(dir_ / "time.csv") << "t_s,x,y,z\n0,0,0,0\n0.001,1,0,0\n0.001,2,0,0\n";
-  EXPECT_EQ(run("haptics " + q(dir_ / "out") + " --trajectory " + q(dir_ / "time.csv") + " --out " + q(dir_ / "r_t.json"), &log), 18) << log;
+  EXPECT_EQ(run_cli("haptics " + q(dir_ / "out") + " --trajectory " + q(dir_ / "time.csv") + " --out " + q(dir_ / "r_t.json"), &log), 18) << log;
   EXPECT_NE(log.find("does not increase"), std::string::npos) << log;
   EXPECT_FALSE(fs::exists(dir_ / "r_t.json"));
 
   // An output directory without meshes: `guide` names the missing surface and writes nothing.
   fs::create_directories(dir_ / "nomesh");
   fs::copy_file(dir_ / "out" / "labels.nii.gz", dir_ / "nomesh" / "labels.nii.gz");
-  EXPECT_EQ(run("guide " + q(dir_ / "nomesh"), &log), 3) << log;
+  EXPECT_EQ(run_cli("guide " + q(dir_ / "nomesh"), &log), 3) << log;
   EXPECT_NE(log.find(".stl"), std::string::npos) << log;
   EXPECT_FALSE(fs::exists(dir_ / "nomesh" / "paths"));
 }

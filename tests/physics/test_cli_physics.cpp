@@ -3,43 +3,23 @@
 #include "physics/calibration.h"
 #include "physics/models.h"
 
+#include "../pipeline/test_support.h"
+
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-#include <sys/wait.h>
 
 namespace fs = std::filesystem;
+using organsmith::testing::run_cli;
+using organsmith::testing::ScratchDir;
 using namespace organsmith::physics;
 
 namespace {
-
-struct Scratch {
-  fs::path dir;
-  Scratch() {
-    dir = fs::temp_directory_path() / ("organsmith_physics_cli_" + std::to_string(::getpid()) + "_" +
-                                       ::testing::UnitTest::GetInstance()->current_test_info()->name());
-    fs::remove_all(dir);
-    fs::create_directories(dir);
-  }
-  ~Scratch() { fs::remove_all(dir); }
-};
-
-int run(const std::string& args, std::string* out = nullptr) {
-  const std::string cmd = std::string("'") + ORGANSMITH_CLI + "' " + args + " 2>&1";
-  FILE* p = popen(cmd.c_str(), "r");
-  std::string text;
-  char buf[4096];
-  while (std::size_t n = std::fread(buf, 1, sizeof buf, p)) text.append(buf, n);
-  const int status = pclose(p);
-  if (out) *out = text;
-  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-}
 
 std::string slurp(const fs::path& p) {
   std::ifstream in(p, std::ios::binary);
@@ -65,16 +45,16 @@ void write_wall_csv(const fs::path& path) {
 }  // namespace
 
 TEST(PhysicsCli, CalibrateWritesParamsAndFitDeterministically) {
-  Scratch s;
-  write_wall_csv(s.dir / "wall.csv");
+  ScratchDir s("physics-cli");
+  write_wall_csv(s.path() / "wall.csv");
   std::string log;
-  ASSERT_EQ(run("calibrate --model fung-wall --data '" + (s.dir / "wall.csv").string() + "' --out '" +
-                (s.dir / "a").string() + "' --seed 5 --residuals relative", &log), 0) << log;
-  ASSERT_EQ(run("calibrate --model fung-wall --data '" + (s.dir / "wall.csv").string() + "' --out '" +
-                (s.dir / "b").string() + "' --seed 5 --residuals relative", &log), 0) << log;
-  EXPECT_EQ(slurp(s.dir / "a" / "fit.csv"), slurp(s.dir / "b" / "fit.csv"));
-  auto j = nlohmann::json::parse(slurp(s.dir / "a" / "params.json"));
-  auto k = nlohmann::json::parse(slurp(s.dir / "b" / "params.json"));
+  ASSERT_EQ(run_cli("calibrate --model fung-wall --data '" + (s.path() / "wall.csv").string() + "' --out '" +
+                (s.path() / "a").string() + "' --seed 5 --residuals relative", &log), 0) << log;
+  ASSERT_EQ(run_cli("calibrate --model fung-wall --data '" + (s.path() / "wall.csv").string() + "' --out '" +
+                (s.path() / "b").string() + "' --seed 5 --residuals relative", &log), 0) << log;
+  EXPECT_EQ(slurp(s.path() / "a" / "fit.csv"), slurp(s.path() / "b" / "fit.csv"));
+  auto j = nlohmann::json::parse(slurp(s.path() / "a" / "params.json"));
+  auto k = nlohmann::json::parse(slurp(s.path() / "b" / "params.json"));
   EXPECT_EQ(j["parameters"], k["parameters"]) << "same seed, same parameters";
   EXPECT_EQ(j["model"], "fung-wall");
   EXPECT_EQ(j["seed"], 5);
@@ -87,48 +67,48 @@ TEST(PhysicsCli, CalibrateWritesParamsAndFitDeterministically) {
   EXPECT_TRUE(j["parameters"][0].contains("lower") && j["parameters"][0].contains("upper"));
   // a1, a2, a4 are not identifiable from uniaxial strips: no standard error is claimed for them.
   EXPECT_TRUE(j["parameters"][1]["standard_error"].is_null());
-  const std::string fit = slurp(s.dir / "a" / "fit.csv");
+  const std::string fit = slurp(s.path() / "a" / "fit.csv");
   EXPECT_EQ(fit.substr(0, fit.find('\n')), "specimen,load,stretch,lateral_stretch,stress_pa,model_stress_pa,residual_pa");
   EXPECT_EQ(std::count(fit.begin(), fit.end(), '\n'), 61);
 }
 
 TEST(PhysicsCli, BadDataExitsWithCalibrationCodeAndWritesNothing) {
-  Scratch s;
-  std::ofstream(s.dir / "bad.csv") << "stretch,stress_pa\n1.1,10\n1.2,nan\n1.3,40\n1.4,50\n1.5,70\n1.6,80\n";
+  ScratchDir s("physics-cli");
+  std::ofstream(s.path() / "bad.csv") << "stretch,stress_pa\n1.1,10\n1.2,nan\n1.3,40\n1.4,50\n1.5,70\n1.6,80\n";
   std::string log;
-  EXPECT_EQ(run("calibrate --model fung-wall --data '" + (s.dir / "bad.csv").string() + "' --out '" +
-                (s.dir / "o").string() + "'", &log), 21) << log;
+  EXPECT_EQ(run_cli("calibrate --model fung-wall --data '" + (s.path() / "bad.csv").string() + "' --out '" +
+                (s.path() / "o").string() + "'", &log), 21) << log;
   EXPECT_NE(log.find("bad.csv:3, column 'stress_pa'"), std::string::npos) << log;
-  EXPECT_FALSE(fs::exists(s.dir / "o"));
-  write_wall_csv(s.dir / "wall.csv");
-  EXPECT_EQ(run("calibrate --model fung-wall --data '" + (s.dir / "wall.csv").string() + "' --out '" +
-                (s.dir / "o").string() + "' --lower 1,1,1,0 --upper 100,50,0.5,20", &log), 2) << log;
+  EXPECT_FALSE(fs::exists(s.path() / "o"));
+  write_wall_csv(s.path() / "wall.csv");
+  EXPECT_EQ(run_cli("calibrate --model fung-wall --data '" + (s.path() / "wall.csv").string() + "' --out '" +
+                (s.path() / "o").string() + "' --lower 1,1,1,0 --upper 100,50,0.5,20", &log), 2) << log;
   EXPECT_NE(log.find("inverted bounds for a2"), std::string::npos) << log;
-  EXPECT_EQ(run("calibrate --model nonsense --data '" + (s.dir / "wall.csv").string() + "' --out '" +
-                (s.dir / "o").string() + "'", &log), 2) << log;
-  EXPECT_FALSE(fs::exists(s.dir / "o"));
+  EXPECT_EQ(run_cli("calibrate --model nonsense --data '" + (s.path() / "wall.csv").string() + "' --out '" +
+                (s.path() / "o").string() + "'", &log), 2) << log;
+  EXPECT_FALSE(fs::exists(s.path() / "o"));
 }
 
 TEST(PhysicsCli, MaterialsListsThesisTables) {
   std::string out;
-  ASSERT_EQ(run("materials --json", &out), 0) << out;
+  ASSERT_EQ(run_cli("materials --json", &out), 0) << out;
   const auto j = nlohmann::json::parse(out);
   EXPECT_GE(j["materials"].size(), 10u);
   EXPECT_EQ(j["regions"]["gallbladder_body"], "fung-organ/table-5.1.2/mean");
-  ASSERT_EQ(run("materials", &out), 0);
+  ASSERT_EQ(run_cli("materials", &out), 0);
   EXPECT_NE(out.find("Table 4.2.2"), std::string::npos);
 }
 
 TEST(PhysicsCli, UncertaintyMonteCarloAndImvfosm) {
-  Scratch s;
+  ScratchDir s("physics-cli");
   std::string log;
-  ASSERT_EQ(run("uncertainty --method mc --samples 2000 --out '" + (s.dir / "mc").string() + "'", &log), 0) << log;
-  const std::string cdf = slurp(s.dir / "mc" / "cdf.csv");
+  ASSERT_EQ(run_cli("uncertainty --method mc --samples 2000 --out '" + (s.path() / "mc").string() + "'", &log), 0) << log;
+  const std::string cdf = slurp(s.path() / "mc" / "cdf.csv");
   EXPECT_EQ(cdf.substr(0, cdf.find('\n')), "stretch,probability,stress_pa");
   EXPECT_EQ(std::count(cdf.begin(), cdf.end(), '\n'), 1 + 7 * 101);
-  const auto j = nlohmann::json::parse(slurp(s.dir / "mc" / "summary.json"));
+  const auto j = nlohmann::json::parse(slurp(s.path() / "mc" / "summary.json"));
   EXPECT_EQ(j["stretches"].size(), 7u);
-  ASSERT_EQ(run("uncertainty --method imvfosm --derivatives printed --out '" + (s.dir / "im").string() + "'", &log), 0) << log;
-  const auto k = nlohmann::json::parse(slurp(s.dir / "im" / "imvfosm.json"));
+  ASSERT_EQ(run_cli("uncertainty --method imvfosm --derivatives printed --out '" + (s.path() / "im").string() + "'", &log), 0) << log;
+  const auto k = nlohmann::json::parse(slurp(s.path() / "im" / "imvfosm.json"));
   EXPECT_EQ(k["sigma"].size(), 7u);
 }

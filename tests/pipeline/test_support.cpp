@@ -41,6 +41,12 @@ CliResult run_cli(const std::string& args) {
   return r;
 }
 
+int run_cli(const std::string& args, std::string* output) {
+  CliResult r = run_cli(args);
+  if (output) *output = std::move(r.output);
+  return r.exit_code;
+}
+
 std::size_t count_files(const fs::path& dir) {
   if (!fs::exists(dir)) return 0;
   std::size_t n = 0;

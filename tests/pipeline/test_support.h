@@ -29,6 +29,8 @@ struct CliResult {
 
 /// Runs the organsmith executable with `args` (shell-quoted by the caller where needed).
 CliResult run_cli(const std::string& args);
+/// The same, returning the exit code; the output goes to `*output` when given.
+int run_cli(const std::string& args, std::string* output);
 
 /// Every file under `dir` (recursively), as paths relative to it.
 std::size_t count_files(const std::filesystem::path& dir);
