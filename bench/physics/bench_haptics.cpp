@@ -5,11 +5,13 @@
 // Usage: bench_haptics [OUT_DIR] [--loop-seconds S]. OUT_DIR is a run's output directory with
 // meshes/ and paths/ (default: ORGANSMITH_SOURCE_DIR/out); without it the phantom part is skipped.
 
+#include "meshing/export.h"
 #include "physics/contact.h"
 #include "physics/guidance.h"
 #include "physics/haptic_loop.h"
 #include "physics/paths.h"
 #include "physics/presets.h"
+#include "tests/physics/synthetic_meshes.h"
 
 #include <Eigen/Geometry>
 
@@ -17,10 +19,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <map>
 #include <numbers>
 #include <random>
 #include <string>
@@ -33,65 +32,9 @@ using clk = std::chrono::steady_clock;
 
 namespace {
 
-/// Binary STL with vertices merged by exact position.
-SurfaceMesh read_binary_stl(const fs::path& f) {
-  std::ifstream in(f, std::ios::binary);
-  SurfaceMesh m;
-  if (!in) return m;
-  char header[80];
-  in.read(header, 80);
-  std::uint32_t n = 0;
-  in.read(reinterpret_cast<char*>(&n), 4);
-  std::map<std::array<float, 3>, int> ids;
-  for (std::uint32_t t = 0; t < n && in; ++t) {
-    float v[12];
-    std::uint16_t attr;
-    in.read(reinterpret_cast<char*>(v), 48);
-    in.read(reinterpret_cast<char*>(&attr), 2);
-    std::array<std::int32_t, 3> tri{};
-    for (int c = 0; c < 3; ++c) {
-      const std::array<float, 3> p{v[3 + 3 * c], v[4 + 3 * c], v[5 + 3 * c]};
-      auto it = ids.find(p);
-      if (it == ids.end()) {
-        it = ids.emplace(p, int(m.vertices_lps_mm.size())).first;
-        m.vertices_lps_mm.emplace_back(p[0], p[1], p[2]);
-      }
-      tri[std::size_t(c)] = it->second;
-    }
-    m.triangles.push_back(tri);
-  }
-  return m;
-}
-
+/// A bumpy ellipsoid (icosphere-based), so that it is not a sphere the BVH finds trivially.
 SurfaceMesh icosphere(double radius, int subdivisions, Eigen::Vector3d centre) {
-  const double t = (1.0 + std::sqrt(5.0)) / 2.0;
-  SurfaceMesh m;
-  for (auto v : std::vector<Eigen::Vector3d>{{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                                             {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}})
-    m.vertices_lps_mm.push_back(v.normalized());
-  m.triangles = {{0, 11, 5}, {0, 5, 1}, {0, 1, 7}, {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4},
-                 {11, 10, 2}, {10, 7, 6}, {7, 1, 8}, {3, 9, 4}, {3, 4, 2}, {3, 2, 6}, {3, 6, 8},
-                 {3, 8, 9}, {4, 9, 5}, {2, 4, 11}, {6, 2, 10}, {8, 6, 7}, {9, 8, 1}};
-  for (int s = 0; s < subdivisions; ++s) {
-    std::map<std::pair<int, int>, int> mid;
-    auto midpoint = [&](int a, int b) {
-      const auto key = std::minmax(a, b);
-      auto it = mid.find(key);
-      if (it != mid.end()) return it->second;
-      m.vertices_lps_mm.push_back((m.vertices_lps_mm[std::size_t(a)] + m.vertices_lps_mm[std::size_t(b)]).normalized());
-      return mid[key] = int(m.vertices_lps_mm.size()) - 1;
-    };
-    std::vector<std::array<std::int32_t, 3>> tris;
-    for (const auto& tr : m.triangles) {
-      const int a = midpoint(tr[0], tr[1]), b = midpoint(tr[1], tr[2]), c = midpoint(tr[2], tr[0]);
-      tris.push_back({tr[0], a, c});
-      tris.push_back({tr[1], b, a});
-      tris.push_back({tr[2], c, b});
-      tris.push_back({a, b, c});
-    }
-    m.triangles = tris;
-  }
-  // An ellipsoid with a bumpy surface, so that it is not a sphere the BVH finds trivially.
+  SurfaceMesh m = organsmith::physics::testing::unit_icosphere(subdivisions);
   for (auto& v : m.vertices_lps_mm) {
     const double bump = 1.0 + 0.05 * std::sin(7 * v.x()) * std::sin(5 * v.y()) * std::sin(6 * v.z());
     v = centre + Eigen::Vector3d(radius * 1.3 * v.x(), radius * v.y(), radius * 0.8 * v.z()) * bump;
@@ -184,7 +127,7 @@ int main(int argc, char** argv) {
   const fs::path wall_f = out / "meshes/trachea/trachea_wall.stl", gb_f = out / "meshes/gallbladder/gallbladder.stl";
   const fs::path inc_f = out / "paths/trachea_incision.json";
   if (fs::exists(wall_f) && fs::exists(gb_f)) {
-    SurfaceMesh gb = read_binary_stl(gb_f), wall = read_binary_stl(wall_f);
+    SurfaceMesh gb = read_stl(gb_f), wall = read_stl(wall_f);
     Polyline path;
     if (fs::exists(inc_f)) path = read_path_file(inc_f);
     else path.points_lps_mm = {wall.vertices_lps_mm.front(), wall.vertices_lps_mm.back()};
