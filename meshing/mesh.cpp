@@ -2,6 +2,7 @@
 // the surfaces, build the wall bodies and tetrahedra, and measure everything. No CGAL here.
 
 #include "meshing/mesh.h"
+#include "core/format.h"
 
 #include "core/errors.h"
 #include "meshing/detail.h"
@@ -39,12 +40,7 @@ double seconds_since(std::chrono::steady_clock::time_point t0) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 }
 
-std::string fmt(double v, int digits = 3) {
-  std::ostringstream s;
-  s.precision(digits);
-  s << v;
-  return s.str();
-}
+std::string fmt(double v, int digits = 3) { return format_g(v, digits); }
 
 /// An organ's mask cropped (with a margin) out of the label map, in the grid frame.
 struct Prepared {

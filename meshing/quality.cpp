@@ -3,6 +3,7 @@
 // measures are closed-form.
 
 #include "meshing/quality.h"
+#include "core/format.h"
 
 #include <Eigen/Geometry>
 
@@ -36,12 +37,7 @@ using Triangles = std::vector<K::Triangle_3>;
 using Primitive = CGAL::AABB_triangle_primitive<K, Triangles::const_iterator>;
 using Tree = CGAL::AABB_tree<CGAL::AABB_traits<K, Primitive>>;
 
-std::string fmt(double v, int digits = 3) {
-  std::ostringstream s;
-  s.precision(digits);
-  s << v;
-  return s.str();
-}
+std::string fmt(double v, int digits = 3) { return format_g(v, digits); }
 
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0.0;

@@ -1,4 +1,5 @@
 #include "physics/calibration.h"
+#include "core/format.h"
 
 #include <Eigen/Dense>
 #include <tbb/parallel_for.h>
@@ -48,12 +49,7 @@ std::string where(const std::filesystem::path& source, std::size_t line, const s
   return source.string() + ":" + std::to_string(line) + ", column '" + column + "'";
 }
 
-std::string fmt(double v) {
-  std::ostringstream s;
-  s.precision(10);
-  s << v;
-  return s.str();
-}
+std::string fmt(double v) { return format_g(v, 10); }
 
 }  // namespace
 

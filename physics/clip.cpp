@@ -1,4 +1,5 @@
 #include "physics/clip.h"
+#include "core/format.h"
 
 #include "clips_toml.h"  // generated from data/clips.toml
 #include "core/errors.h"
@@ -21,11 +22,7 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-std::string fmt(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
+std::string fmt(double v) { return format_g(v); }
 
 /// Reads the tables of a clip preset, insisting that every key is known and present.
 class PresetReader {

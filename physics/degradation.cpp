@@ -1,4 +1,5 @@
 #include "physics/degradation.h"
+#include "core/format.h"
 
 #include "physics/calibration.h"
 
@@ -19,11 +20,7 @@ namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
-std::string fmt(double v) {
-  std::ostringstream s;
-  s << v;
-  return s.str();
-}
+std::string fmt(double v) { return format_g(v); }
 
 double max_abs(const Eigen::VectorXd& v) { return v.size() ? v.cwiseAbs().maxCoeff() : 0.0; }
 

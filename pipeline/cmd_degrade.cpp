@@ -4,6 +4,7 @@
 // mass-remaining series (Table 6.1). Output formats: physics/DEGRADATION.md ("Outputs").
 
 #include "core/errors.h"
+#include "core/format.h"
 #include "physics/clip.h"
 #include "physics/degradation.h"
 #include "pipeline/commands.h"
@@ -31,18 +32,10 @@ using namespace organsmith::physics;
 
 namespace {
 
-std::string num(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
-}
+std::string num(double v) { return format_g(v, 10); }
 
 /// Four significant digits, for what the terminal shows (files keep full precision).
-std::string show(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.4g", v);
-  return buf;
-}
+std::string show(double v) { return format_g(v, 4); }
 
 struct DegradeFlags {
   std::string out, clip, fit;
@@ -221,12 +214,6 @@ void write_plot_pngs(const std::vector<Plot>& plots, const fs::path& dir) {
   }
 }
 
-void write_text(const fs::path& p, const std::string& text) {
-  std::ofstream f(p, std::ios::binary);
-  f << text;
-  if (!f) throw OutputError("cannot write " + p.filename().string(), p);
-}
-
 ClipPreset load_preset(const DegradeFlags& f) {
   return f.clip.empty() ? builtin_clip_preset() : read_clip_preset(f.clip);
 }
@@ -344,14 +331,14 @@ int run_simulate(const DegradeFlags& f) {
 
   const fs::path out = fs::absolute(f.out);
   write_directory_atomically(out, [&](const fs::path& dir) {
-    write_text(dir / "original.vtp", stage_vtp(model, nullptr, "original (stress-free) shape"));
-    write_text(dir / "stage_0_0.0w.vtp", stage_vtp(model, &r.initial, "deployed, t = 0"));
+    write_text_atomic(dir / "original.vtp", stage_vtp(model, nullptr, "original (stress-free) shape"));
+    write_text_atomic(dir / "stage_0_0.0w.vtp", stage_vtp(model, &r.initial, "deployed, t = 0"));
     for (std::size_t k = 0; k < r.stages.size(); ++k)
-      write_text(dir / st[k + 1]["file"].get<std::string>(),
+      write_text_atomic(dir / st[k + 1]["file"].get<std::string>(),
                  stage_vtp(model, &r.stages[k], "t = " + num(r.stages[k].t_days) + " days"));
-    write_text(dir / "mass.csv", csv.str());
+    write_text_atomic(dir / "mass.csv", csv.str());
     if (f.snapshots) write_plot_pngs(degradation_plots(model, r, f.load_n, f.tau_d), dir);
-    write_text(dir / "summary.json", j.dump(2) + "\n");
+    write_text_atomic(dir / "summary.json", j.dump(2) + "\n");
   });
   std::cout << "clip " << p.name << " (" << g.elements() << " elements) under " << num(f.load_n) << " N, τ_D "
             << num(f.tau_d) << " " << kTauUnitName << "\n"
@@ -406,9 +393,9 @@ int run_fit(const DegradeFlags& f) {
   for (const auto& s : curve.steps) curve_csv << num(s.t_days) << ',' << num(s.mass_fraction) << '\n';
   const fs::path out = fs::absolute(f.out);
   write_directory_atomically(out, [&](const fs::path& dir) {
-    write_text(dir / "fit.json", j.dump(2) + "\n");
-    write_text(dir / "fit.csv", csv.str());
-    write_text(dir / "model_mass.csv", curve_csv.str());
+    write_text_atomic(dir / "fit.json", j.dump(2) + "\n");
+    write_text_atomic(dir / "fit.csv", csv.str());
+    write_text_atomic(dir / "model_mass.csv", curve_csv.str());
     if (f.snapshots) {
       Plot p;
       p.name = "degradation_fit";

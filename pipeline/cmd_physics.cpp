@@ -3,6 +3,7 @@
 // thesis parameter sets embedded from data/materials.toml).
 
 #include "core/errors.h"
+#include "core/format.h"
 #include "physics/calibration.h"
 #include "physics/presets.h"
 #include "physics/uncertainty.h"
@@ -24,11 +25,7 @@ using namespace organsmith::physics;
 
 namespace {
 
-std::string num(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.10g", v);
-  return buf;
-}
+std::string num(double v) { return format_g(v, 10); }
 
 std::string load_name(LoadCase l) {
   switch (l) {
