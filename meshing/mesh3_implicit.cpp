@@ -2,6 +2,7 @@
 // multi-region tetrahedra. This is one of the two heavy CGAL translation units; keep Mesh_3
 // instantiations here and in mesh3_polyhedral.cpp only.
 
+#include "meshing/c3t3_to_tets.h"
 #include "meshing/detail.h"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -176,22 +177,7 @@ SurfaceMesh mesh3_surface(const LabelFunction& f, const Box& box, const Mesh3Cri
 
 TetMesh mesh3_tets_implicit(const LabelFunction& f, const Box& box, const Mesh3Criteria& c) {
   const C3t3 c3t3 = run_mesh3(f, box, c, true);
-  const Tr& tr = c3t3.triangulation();
-  TetMesh out;
-  std::unordered_map<Tr::Vertex_handle, std::int32_t> index;
-  auto id = [&](Tr::Vertex_handle v) {
-    auto [it, fresh] = index.emplace(v, std::int32_t(out.vertices_lps_mm.size()));
-    if (fresh) out.vertices_lps_mm.push_back(to_eigen(tr, v));
-    return it->second;
-  };
-  for (auto cit = c3t3.cells_in_complex_begin(); cit != c3t3.cells_in_complex_end(); ++cit) {
-    std::array<std::int32_t, 4> t{id(cit->vertex(0)), id(cit->vertex(1)), id(cit->vertex(2)), id(cit->vertex(3))};
-    const auto& p = out.vertices_lps_mm;
-    if ((p[t[1]] - p[t[0]]).dot((p[t[2]] - p[t[0]]).cross(p[t[3]] - p[t[0]])) < 0) std::swap(t[2], t[3]);
-    out.tets.push_back(t);
-    out.region_ids.push_back(std::int32_t(c3t3.subdomain_index(cit)));
-  }
-  return out;
+  return tets_from_c3t3(c3t3, [&](auto cell) { return c3t3.subdomain_index(cell); });
 }
 
 }  // namespace organsmith::meshing_detail

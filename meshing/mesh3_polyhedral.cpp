@@ -2,6 +2,7 @@
 // of the trachea wall, whose flat end caps meet the tube in sharp rims that an implicit domain
 // would round off. The second heavy CGAL translation unit.
 
+#include "meshing/c3t3_to_tets.h"
 #include "meshing/detail.h"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -13,7 +14,6 @@
 #include <CGAL/make_mesh_3.h>
 
 #include <stdexcept>
-#include <unordered_map>
 
 namespace organsmith::meshing_detail {
 namespace {
@@ -53,25 +53,7 @@ TetMesh mesh3_tets_polyhedral(const SurfaceMesh& closed, std::int32_t region, do
   if (c.exude_bound_deg > 0)
     CGAL::exude_mesh_3(c3t3, params::time_limit = c.optimiser_seconds, params::sliver_bound = c.exude_bound_deg);
 
-  const Tr& tr = c3t3.triangulation();
-  TetMesh out;
-  std::unordered_map<Tr::Vertex_handle, std::int32_t> index;
-  auto id = [&](Tr::Vertex_handle v) {
-    auto [it, fresh] = index.emplace(v, std::int32_t(out.vertices_lps_mm.size()));
-    if (fresh) {
-      const Point p = tr.geom_traits().construct_point_3_object()(v->point());
-      out.vertices_lps_mm.emplace_back(p.x(), p.y(), p.z());
-    }
-    return it->second;
-  };
-  for (auto cit = c3t3.cells_in_complex_begin(); cit != c3t3.cells_in_complex_end(); ++cit) {
-    std::array<std::int32_t, 4> t{id(cit->vertex(0)), id(cit->vertex(1)), id(cit->vertex(2)), id(cit->vertex(3))};
-    const auto& p = out.vertices_lps_mm;
-    if ((p[t[1]] - p[t[0]]).dot((p[t[2]] - p[t[0]]).cross(p[t[3]] - p[t[0]])) < 0) std::swap(t[2], t[3]);
-    out.tets.push_back(t);
-    out.region_ids.push_back(region);
-  }
-  return out;
+  return tets_from_c3t3(c3t3, [region](auto) { return region; });
 }
 
 }  // namespace organsmith::meshing_detail
