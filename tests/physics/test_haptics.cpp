@@ -370,24 +370,29 @@ TEST(HapticsLoop, SeqLockNeverTearsAValue) {
     std::array<double, 12> v;
   };
   SeqLock<Value> lock;
-  std::atomic<bool> done{false};
+  // The writer runs until the reader has read 200 000 times (a fixed number of writes could all
+  // be over before a descheduled reader starts, and nothing would be tested).
+  std::atomic<bool> stop{false};
+  std::atomic<int> last{0};
   std::thread writer([&] {
-    for (int i = 1; i <= 200000; ++i) {
+    int i = 0;
+    while (!stop.load(std::memory_order_relaxed)) {
       Value x;
-      x.v.fill(double(i));
+      x.v.fill(double(++i));
       lock.write(x);
     }
-    done = true;
+    last = i;
   });
-  long reads = 0;
-  while (!done) {
+  while (lock.read().v[0] == 0.0) std::this_thread::yield();  // the writer has started
+  long torn = 0;
+  for (long reads = 0; reads < 200000; ++reads) {
     const Value x = lock.read();
-    for (double e : x.v) ASSERT_EQ(e, x.v[0]);
-    ++reads;
+    for (double e : x.v) torn += e != x.v[0];
   }
+  stop = true;
   writer.join();
-  EXPECT_GT(reads, 0);
-  EXPECT_EQ(lock.read().v[5], 200000.0);
+  EXPECT_EQ(torn, 0);
+  EXPECT_EQ(lock.read().v[5], double(last.load()));
 }
 
 namespace {
