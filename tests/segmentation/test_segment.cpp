@@ -99,7 +99,7 @@ TEST(SegmentPhantom, BothOrgansDiceAtLeast095) {
   RecordProperty("trachea_dice", std::to_string(tr.dice));
   std::printf("phantom: gallbladder Dice %.4f (volume %+.1f %%), trachea Dice %.4f (volume %+.1f %%)\n", gb.dice,
               100 * gb.volume_error, tr.dice, 100 * tr.volume_error);
-  // Issue target: Dice ≥ 0.95 for both (reached: gallbladder 0.98, trachea 0.96).
+  // Issue target: Dice ≥ 0.95 for both (reached: gallbladder 0.98, trachea 0.99).
   EXPECT_GE(gb.dice, 0.95);
   EXPECT_GE(tr.dice, 0.95);
   ASSERT_EQ(r.organs.size(), 2u);
@@ -107,6 +107,26 @@ TEST(SegmentPhantom, BothOrgansDiceAtLeast095) {
     EXPECT_FALSE(o.contours.contours.empty());
     for (const auto& c : o.contours.contours) EXPECT_GE(c.points_lps_mm.size(), 8u);
   }
+}
+
+// The method must not depend on the 2.5 mm default slices: chest CTs come at 1–2 mm. A phantom
+// with 1 mm slices and another noise/shape seed (400 slices), scored the same way. Measured:
+// gallbladder 0.979, trachea 0.984 (1.25 mm: 0.971, 0.983).
+TEST(SegmentPhantom, ThinSlicesAndAnotherSeedStillDiceAtLeast095) {
+  PhantomOptions po;
+  po.slice_mm = 1.0;
+  po.seed = 7;
+  NullProgress np;
+  const Phantom ph = synthesize_phantom(po, np);
+  const SegmentationResult r =
+      segment_organs(ph.ct, {{"gallbladder", ph.seeds_lps_mm.at("gallbladder"), {}}, {"trachea", {}, {}}}, {}, np);
+  const Score gb = score(ph.truth, std::uint8_t(Label::gallbladder), r.labels, 1);
+  const Score tr = score(ph.truth, std::uint8_t(Label::trachea), r.labels, 2);
+  std::printf("phantom, 1 mm slices, seed 7: gallbladder Dice %.4f (volume %+.1f %%), trachea Dice %.4f (volume %+.1f %%)\n",
+              gb.dice, 100 * gb.volume_error, tr.dice, 100 * tr.volume_error);
+  EXPECT_GE(gb.dice, 0.95);
+  EXPECT_GE(tr.dice, 0.95);
+  EXPECT_LT(std::abs(gb.volume_error), 0.15);
 }
 
 TEST(SegmentPhantom, DeterministicAcrossRunsAndThreading) {
