@@ -356,7 +356,11 @@ void round_trip(double tau, int group) {
   }
   std::sort(errors.begin(), errors.end());
   // The 2 % target is asserted on the median of the three noisy fits; single fits scatter with the
-  // noise (the largest error is printed and reported in DEGRADATION.md).
+  // noise. Seeds 1–3 are favourable draws: over 40 draws (bench/physics/tau_roundtrip_study) 22 %
+  // of fits are within 2 % for days 1, 3, 7, 14, 28 and 52–58 % for every 3.5 days; the linearised
+  // (Cramér–Rao) spread of τ_D is 5.8 % and 3.1 %. So this is a regression check of the fitter on
+  // fixed draws (it fails if the fit is biased or lands on a wrong minimum), not evidence that the
+  // 2 % target holds for any draw — see DEGRADATION.md.
   EXPECT_LE(errors[1], 0.02) << "median |error| over 3 noisy fits";
 }
 
