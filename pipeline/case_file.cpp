@@ -2,6 +2,7 @@
 
 #include "core/errors.h"
 #include "default_case_toml.h"  // generated from data/default_case.toml
+#include "segmentation/presets.h"
 
 #include <toml++/toml.h>
 
@@ -185,6 +186,16 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
     std::ostringstream js;
     js << toml::json_formatter{*stages};
     c.other_stages = nlohmann::json::parse(js.str());
+    if (const toml::table* presets = root["stages"]["segment"]["presets"].as_table()) {
+      std::ostringstream ts;
+      ts << toml::toml_formatter{*presets};
+      c.segment_presets_toml = ts.str();
+      try {
+        parse_organ_presets(c.segment_presets_toml, default_organ_presets());
+      } catch (const Error& e) {
+        throw CaseFileError(e.message() + " (in [stages.segment.presets])", origin, e.hint());
+      }
+    }
   }
   return c;
 }

@@ -34,6 +34,9 @@ struct CaseFile {
   std::filesystem::path out_dir = "out";
   /// Option tables of stages this build does not provide yet, kept verbatim for the manifest.
   nlohmann::json other_stages = nlohmann::json::object();
+  /// [stages.segment.presets] re-serialised as TOML (organ tables overriding data/organs.toml;
+  /// validated on load); empty when the case has none.
+  std::string segment_presets_toml;
 };
 
 /// Organ names organsmith knows.

@@ -14,6 +14,7 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <cstdio>
 #include <fstream>
 #include <memory>
 #include <sstream>
@@ -31,6 +32,7 @@ struct SegmentFlags {
   std::vector<std::string> seeds;      // "X,Y,Z" LPS mm
   std::vector<std::string> seeds_ijk;  // "I,J,K"
   std::string presets;                 // TOML file overriding data/organs.toml
+  bool print_presets = false;
 };
 
 std::array<double, 3> parse_triple(const std::string& s, const char* what) {
@@ -45,6 +47,14 @@ std::array<double, 3> parse_triple(const std::string& s, const char* what) {
 }
 
 int run_segment(const SegmentFlags& f) {
+  if (f.print_presets) {
+    std::fwrite(default_organ_presets_toml().data(), 1, default_organ_presets_toml().size(), stdout);
+    return 0;
+  }
+  // Required unless --print-presets (checked here: CLI11 has no conditional `required`).
+  if (f.input.empty()) throw UsageError("INPUT is required", "give a DICOM directory or file, or a NIfTI/NRRD/MHA volume");
+  if (f.out.empty()) throw UsageError("--out is required", "give the output directory, e.g. --out seg");
+  if (f.organs.empty()) throw UsageError("--organ is required", "--organ gallbladder --seed X,Y,Z and/or --organ trachea");
   const auto t0 = std::chrono::steady_clock::now();
   const auto presets = f.presets.empty() ? default_organ_presets() : [&] {
     std::ifstream in(f.presets);
@@ -131,13 +141,16 @@ std::vector<Command> segmentation_commands(CLI::App& app) {
       "the trachea automatically (most cranial round midline air lumen down to the carina).\n"
       "Writes DIR/labels.nii.gz (1 gallbladder, 2 trachea; the input's grid), DIR/contours_<organ>.json\n"
       "(LPS mm), DIR/overlay_<organ>.png for review, and DIR/segmentation.json.");
-  sub->add_option("INPUT", flags->input, "DICOM directory or file, or .nii/.nii.gz/.nrrd/.mha")->required();
-  sub->add_option("--out", flags->out, "output directory (replaced atomically)")->required();
-  sub->add_option("--organ", flags->organs, "gallbladder or trachea; repeat for several organs")->required();
+  sub->add_option("INPUT", flags->input, "DICOM directory or file, or .nii/.nii.gz/.nrrd/.mha (required)");
+  sub->add_option("--out", flags->out, "output directory, replaced atomically (required)");
+  sub->add_option("--organ", flags->organs, "gallbladder or trachea; repeat for several organs (required)");
   sub->add_option("--seed", flags->seeds, "seed inside the organ, X,Y,Z in LPS mm; one per seeded --organ, in order")
       ->allow_extra_args(false);
   sub->add_option("--seed-ijk", flags->seeds_ijk, "seed as voxel index I,J,K instead of --seed")->allow_extra_args(false);
-  sub->add_option("--presets", flags->presets, "TOML file overriding organ presets (keys as in data/organs.toml)");
+  sub->add_option("--presets", flags->presets,
+                  "TOML file overriding organ presets: any key of --print-presets, e.g. [gallbladder] alpha = 0.8");
+  sub->add_flag("--print-presets", flags->print_presets,
+                "print the embedded organ presets (HU windows, snake parameters, size limits, with sources) and exit");
   return {Command{sub, [flags] { return run_segment(*flags); }}};
 }
 

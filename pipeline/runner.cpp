@@ -295,6 +295,7 @@ class Runner {
       requests.push_back(std::move(r));
     }
     SegmentOptions options;
+    options.preset_overrides_toml = case_.segment_presets_toml;
     const SegmentationResult result = segment_organs(volume(), requests, options, progress_);
     write_label_map(result.labels, staging / "labels.nii.gz");
     for (const auto& organ : result.organs) {

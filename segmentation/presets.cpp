@@ -5,30 +5,38 @@
 
 #include <toml++/toml.h>
 
+#include <set>
+#include <string>
+
 namespace organsmith {
 
 std::string_view default_organ_presets_toml() { return kOrgansToml; }
 
 namespace {
 
-void get(const toml::table& t, const std::string& organ, const char* key, double& v) {
+using Seen = std::set<std::string, std::less<>>;
+
+void get(const toml::table& t, const std::string& organ, Seen& seen, const char* key, double& v) {
+  seen.insert(key);
   const toml::node* n = t.get(key);
   if (!n) return;
   if (auto d = n->value<double>()) v = *d;
   else throw CaseFileError("organ preset '" + organ + "." + key + "' must be a number", {});
 }
-void get(const toml::table& t, const std::string& organ, const char* key, int& v) {
+void get(const toml::table& t, const std::string& organ, Seen& seen, const char* key, int& v) {
   double d = v;
-  get(t, organ, key, d);
+  get(t, organ, seen, key, d);
   v = int(d);
 }
-void get(const toml::table& t, const std::string& organ, const char* key, bool& v) {
+void get(const toml::table& t, const std::string& organ, Seen& seen, const char* key, bool& v) {
+  seen.insert(key);
   const toml::node* n = t.get(key);
   if (!n) return;
   if (auto b = n->value<bool>()) v = *b;
   else throw CaseFileError("organ preset '" + organ + "." + key + "' must be true or false", {});
 }
-void get_range(const toml::table& t, const std::string& organ, const char* key, double& lo, double& hi) {
+void get_range(const toml::table& t, const std::string& organ, Seen& seen, const char* key, double& lo, double& hi) {
+  seen.insert(key);
   const toml::node* n = t.get(key);
   if (!n) return;
   const toml::array* a = n->as_array();
@@ -54,51 +62,57 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     if (!t) throw CaseFileError("organ preset '" + organ + "' must be a table", {});
     OrganPreset& p = base[organ];
     p.organ = organ;
+    Seen seen;
     int label = p.label;
-    get(*t, organ, "label", label);
+    get(*t, organ, seen, "label", label);
     if (label < 1 || label > 255) throw CaseFileError("organ preset '" + organ + ".label' must be 1–255", {});
     p.label = std::uint8_t(label);
-    get(*t, organ, "needs_seed", p.needs_seed);
-    get_range(*t, organ, "seed_hu_range", p.seed_hu_lo, p.seed_hu_hi);
-    get(*t, organ, "seed_radius_mm", p.seed_radius_mm);
-    get(*t, organ, "region_below_hu", p.region_below_hu);
-    get(*t, organ, "region_above_hu", p.region_above_hu);
-    get(*t, organ, "air_hu", p.air_hu);
-    get(*t, organ, "pressure_ramp_hu", p.pressure_ramp_hu);
-    get(*t, organ, "region_sigma_mm", p.region_sigma_mm);
-    get(*t, organ, "region_sigma_px", p.region_sigma_px);
-    get(*t, organ, "region_open_mm", p.region_open_mm);
-    get(*t, organ, "region_open_fraction", p.region_open_fraction);
-    get_range(*t, organ, "edge_window_hu", p.edge_window_lo_hu, p.edge_window_hi_hu);
-    get(*t, organ, "edge_sigma_mm", p.edge_sigma_mm);
-    get(*t, organ, "edge_stop", p.edge_stop);
-    get(*t, organ, "neck_ratio", p.neck_ratio);
-    get(*t, organ, "neck_depth_mm", p.neck_depth_mm);
-    get(*t, organ, "seat_band_mm", p.seat_band_mm);
-    get(*t, organ, "seat_sigma_mm", p.seat_sigma_mm);
-    get(*t, organ, "seat_outside_mm", p.seat_outside_mm);
-    get(*t, organ, "seat_min_contrast_hu", p.seat_min_contrast_hu);
-    get(*t, organ, "min_edge_support", p.min_edge_support);
-    get(*t, organ, "edge_support_level", p.edge_support_level);
-    get(*t, organ, "min_area_mm2", p.min_area_mm2);
-    get(*t, organ, "max_area_mm2", p.max_area_mm2);
-    get(*t, organ, "max_area_ratio", p.max_area_ratio);
-    get(*t, organ, "max_mean_drift_hu", p.max_mean_drift_hu);
-    get(*t, organ, "min_fill", p.min_fill);
-    get(*t, organ, "max_aspect", p.max_aspect);
-    get(*t, organ, "max_midline_offset_mm", p.max_midline_offset_mm);
-    get(*t, organ, "min_length_mm", p.min_length_mm);
-    get(*t, organ, "start_radius_mm", p.start_radius_mm);
-    get(*t, organ, "roi_margin_mm", p.roi_margin_mm);
-    get(*t, organ, "alpha", p.alpha);
-    get(*t, organ, "beta", p.beta);
-    get(*t, organ, "kappa", p.kappa);
-    get(*t, organ, "balloon", p.balloon);
-    get(*t, organ, "point_spacing_mm", p.point_spacing_mm);
-    get(*t, organ, "gvf_mu", p.gvf_mu);
-    get(*t, organ, "max_iterations", p.max_iterations);
+    get(*t, organ, seen, "needs_seed", p.needs_seed);
+    get_range(*t, organ, seen, "seed_hu_range", p.seed_hu_lo, p.seed_hu_hi);
+    get(*t, organ, seen, "seed_radius_mm", p.seed_radius_mm);
+    get(*t, organ, seen, "region_below_hu", p.region_below_hu);
+    get(*t, organ, seen, "region_above_hu", p.region_above_hu);
+    get(*t, organ, seen, "air_hu", p.air_hu);
+    get(*t, organ, seen, "pressure_ramp_hu", p.pressure_ramp_hu);
+    get(*t, organ, seen, "region_sigma_mm", p.region_sigma_mm);
+    get(*t, organ, seen, "region_sigma_px", p.region_sigma_px);
+    get(*t, organ, seen, "region_open_mm", p.region_open_mm);
+    get(*t, organ, seen, "region_open_fraction", p.region_open_fraction);
+    get_range(*t, organ, seen, "edge_window_hu", p.edge_window_lo_hu, p.edge_window_hi_hu);
+    get(*t, organ, seen, "edge_sigma_mm", p.edge_sigma_mm);
+    get(*t, organ, seen, "edge_stop", p.edge_stop);
+    get(*t, organ, seen, "neck_ratio", p.neck_ratio);
+    get(*t, organ, seen, "neck_depth_mm", p.neck_depth_mm);
+    get(*t, organ, seen, "seat_band_mm", p.seat_band_mm);
+    get(*t, organ, seen, "seat_sigma_mm", p.seat_sigma_mm);
+    get(*t, organ, seen, "seat_outside_mm", p.seat_outside_mm);
+    get(*t, organ, seen, "seat_min_contrast_hu", p.seat_min_contrast_hu);
+    get(*t, organ, seen, "min_edge_support", p.min_edge_support);
+    get(*t, organ, seen, "edge_support_level", p.edge_support_level);
+    get(*t, organ, seen, "min_area_mm2", p.min_area_mm2);
+    get(*t, organ, seen, "max_area_mm2", p.max_area_mm2);
+    get(*t, organ, seen, "max_area_ratio", p.max_area_ratio);
+    get(*t, organ, seen, "max_mean_drift_hu", p.max_mean_drift_hu);
+    get(*t, organ, seen, "min_fill", p.min_fill);
+    get(*t, organ, seen, "max_aspect", p.max_aspect);
+    get(*t, organ, seen, "max_midline_offset_mm", p.max_midline_offset_mm);
+    get(*t, organ, seen, "min_length_mm", p.min_length_mm);
+    get(*t, organ, seen, "start_radius_mm", p.start_radius_mm);
+    get(*t, organ, seen, "roi_margin_mm", p.roi_margin_mm);
+    get(*t, organ, seen, "alpha", p.alpha);
+    get(*t, organ, seen, "beta", p.beta);
+    get(*t, organ, seen, "kappa", p.kappa);
+    get(*t, organ, seen, "balloon", p.balloon);
+    get(*t, organ, seen, "point_spacing_mm", p.point_spacing_mm);
+    get(*t, organ, seen, "gvf_mu", p.gvf_mu);
+    get(*t, organ, seen, "max_iterations", p.max_iterations);
     if (p.point_spacing_mm <= 0 || p.gvf_mu <= 0 || p.max_iterations < 1 || p.pressure_ramp_hu <= 0)
       throw CaseFileError("organ preset '" + organ + "': point_spacing_mm, gvf_mu, pressure_ramp_hu and max_iterations must be positive", {});
+    // A misspelt key would otherwise fall back to the default without a word.
+    for (auto&& [key, value] : *t)
+      if (!seen.count(key.str()))
+        throw CaseFileError("unknown organ preset key '" + organ + "." + std::string(key.str()) + "'", {},
+                            "`organsmith segment --print-presets` lists the keys");
   }
   return base;
 }

@@ -1,5 +1,6 @@
 #include "core/errors.h"
 #include "pipeline/case_file.h"
+#include "segmentation/presets.h"
 
 #include <gtest/gtest.h>
 
@@ -74,4 +75,33 @@ TEST(CaseFile, MistakesAreRejectedNotDefaulted) {
   EXPECT_EQ(parse_code("[[organ]]\nname = \"trachea\"\n[[organ]]\nname = \"trachea\"\n"), ExitCode::case_file);
   EXPECT_EQ(parse_code("[case\n"), ExitCode::case_file);                                       // syntax
   EXPECT_EQ(parse_code("[ingest]\nmax_memory_mb = -1\n"), ExitCode::case_file);
+}
+
+TEST(CaseFile, SegmentationPresetsOverrideTheEmbeddedOnesAndMisspeltKeysAreRejected) {
+  const CaseFile c = parse_case(R"(
+[case]
+input = "phantom"
+[stages.segment.presets.gallbladder]
+alpha = 0.85
+seed_hu_range = [-20.0, 35.0]
+)",
+                                "/cases/p.toml");
+  ASSERT_FALSE(c.segment_presets_toml.empty());
+  const auto presets = parse_organ_presets(c.segment_presets_toml, default_organ_presets());
+  EXPECT_DOUBLE_EQ(presets.at("gallbladder").alpha, 0.85);
+  EXPECT_DOUBLE_EQ(presets.at("gallbladder").seed_hu_lo, -20.0);
+  EXPECT_DOUBLE_EQ(presets.at("gallbladder").seed_hu_hi, 35.0);
+  // Keys not given keep the embedded values; other organs are untouched.
+  EXPECT_DOUBLE_EQ(presets.at("gallbladder").beta, default_organ_presets().at("gallbladder").beta);
+  EXPECT_DOUBLE_EQ(presets.at("trachea").alpha, default_organ_presets().at("trachea").alpha);
+
+  try {
+    parse_case("[stages.segment.presets.trachea]\nmin_fil = 0.5\n", "/cases/typo.toml");
+    ADD_FAILURE() << "a misspelt preset key was accepted";
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::case_file);
+    EXPECT_NE(std::string(e.what()).find("trachea.min_fil"), std::string::npos) << e.what();
+    EXPECT_EQ(e.path(), fs::path("/cases/typo.toml"));
+  }
+  EXPECT_EQ(parse_code("[stages.segment.presets.trachea]\nalpha = \"soft\"\n"), ExitCode::case_file);
 }
