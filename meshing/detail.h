@@ -12,6 +12,8 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <string>
+#include <utility>
 #include <vector>
 
 namespace organsmith::meshing_detail {
@@ -77,6 +79,14 @@ struct RemeshParams {
 /// the smallest angles (flips, collapses, angle smoothing), and orients it outward.
 SurfaceMesh repair_and_remesh(const SurfaceMesh& in, const RemeshParams& p, std::vector<std::string>& notes);
 
+/// The wall of a tube from its two surfaces, both closed and cut flat by the same planes
+/// (axis, coordinate): the outer surface and the lumen (turned inside out), their caps removed
+/// and replaced by the annuli between the rims on each plane (constrained Delaunay, then
+/// remeshed to the target edge with the rims and both tubes held). One genus-1 surface, outward.
+/// Throws when the surfaces do not join (no caps, rims that cross, a non-manifold result).
+SurfaceMesh tube_wall_from_surfaces(const SurfaceMesh& outer, const SurfaceMesh& lumen,
+                                    const std::vector<std::pair<int, double>>& planes, const RemeshParams& p);
+
 /// Axis-aligned cut: keeps the part with lo ≤ q[axis] ≤ hi and closes it with flat caps.
 SurfaceMesh clip_slab(const SurfaceMesh& in, int axis, double lo, double hi);
 
@@ -87,10 +97,15 @@ namespace organsmith::meshing_detail {
 /// Separable Gaussian smoothing of `f` in place; σ per axis in samples (0 = none on that axis).
 void gaussian_smooth(Field3& f, const Eigen::Vector3d& sigma_samples);
 
+/// Which side of a boundary `signed_distance` measures.
+enum class DistanceSide { both, inside, outside };
+
 /// Signed Euclidean distance (mm) to the boundary of {q : f(q) ≥ iso}, negative inside, on
 /// f's own grid (exact distance transform between sample centres, half a sample subtracted
-/// so that the zero level sits between inside and outside samples).
-Field3 signed_distance(const Field3& f, float iso);
+/// so that the zero level sits between inside and outside samples). With `side` inside or
+/// outside only that side is measured (one transform instead of two); samples on the other
+/// side hold ∓ half a sample, which keeps the sign and the zero level.
+Field3 signed_distance(const Field3& f, float iso, DistanceSide side = DistanceSide::both);
 
 /// f resampled trilinearly on a grid of spacing `h_mm` covering [lo, hi].
 Field3 resample(const Field3& f, const Box& box, double h_mm);

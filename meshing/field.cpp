@@ -12,26 +12,26 @@
 namespace organsmith::meshing_detail {
 
 double Field3::sample(const Eigen::Vector3d& q) const {
-  const Eigen::Vector3d u = (q - origin).cwiseQuotient(h);
-  std::array<std::int64_t, 3> i0{};
-  std::array<double, 3> t{};
+  // The hot call of every implicit domain (Mesh_3 asks it millions of times per organ): no
+  // clamping per corner (i0 ≤ n − 2 keeps i0 + 1 inside), one index computation.
+  std::int64_t i0[3];
+  double t[3];
   for (int a = 0; a < 3; ++a) {
-    if (!(u[a] >= 0.0) || u[a] > double(n[a] - 1)) return outside;
-    i0[a] = std::min<std::int64_t>(std::int64_t(u[a]), n[a] - 2 < 0 ? 0 : n[a] - 2);
-    t[a] = u[a] - double(i0[a]);
+    const double u = (q[a] - origin[a]) / h[a];
+    if (!(u >= 0.0) || u > double(n[a] - 1)) return outside;
+    i0[a] = std::min<std::int64_t>(std::int64_t(u), n[a] - 2);
+    t[a] = u - double(i0[a]);
   }
-  auto at = [&](int di, int dj, int dk) {
-    const std::int64_t i = std::min(i0[0] + di, n[0] - 1), j = std::min(i0[1] + dj, n[1] - 1),
-                       k = std::min(i0[2] + dk, n[2] - 1);
-    return double(v[std::size_t(index(i, j, k))]);
-  };
-  const double c00 = at(0, 0, 0) * (1 - t[0]) + at(1, 0, 0) * t[0];
-  const double c10 = at(0, 1, 0) * (1 - t[0]) + at(1, 1, 0) * t[0];
-  const double c01 = at(0, 0, 1) * (1 - t[0]) + at(1, 0, 1) * t[0];
-  const double c11 = at(0, 1, 1) * (1 - t[0]) + at(1, 1, 1) * t[0];
-  const double c0 = c00 * (1 - t[1]) + c10 * t[1];
-  const double c1 = c01 * (1 - t[1]) + c11 * t[1];
-  return c0 * (1 - t[2]) + c1 * t[2];
+  if (n[0] < 2 || n[1] < 2 || n[2] < 2) return double(v[std::size_t(index(i0[0] < 0 ? 0 : i0[0], i0[1] < 0 ? 0 : i0[1], i0[2] < 0 ? 0 : i0[2]))]);
+  const std::int64_t sx = 1, sy = n[0], sz = n[0] * n[1];
+  const float* p = v.data() + index(i0[0], i0[1], i0[2]);
+  const double c00 = p[0] + t[0] * (double(p[sx]) - p[0]);
+  const double c10 = p[sy] + t[0] * (double(p[sy + sx]) - p[sy]);
+  const double c01 = p[sz] + t[0] * (double(p[sz + sx]) - p[sz]);
+  const double c11 = p[sz + sy] + t[0] * (double(p[sz + sy + sx]) - p[sz + sy]);
+  const double c0 = c00 + t[1] * (c10 - c00);
+  const double c1 = c01 + t[1] * (c11 - c01);
+  return c0 + t[2] * (c1 - c0);
 }
 
 namespace {
@@ -132,11 +132,13 @@ std::vector<double> squared_edt(const Field3& f, const std::vector<char>& featur
 
 }  // namespace
 
-Field3 signed_distance(const Field3& f, float iso) {
+Field3 signed_distance(const Field3& f, float iso, DistanceSide side) {
   std::vector<char> inside(f.v.size()), outside(f.v.size());
   for (std::size_t i = 0; i < f.v.size(); ++i) inside[i] = !(outside[i] = f.v[i] < iso);
-  const std::vector<double> to_inside = squared_edt(f, inside);
-  const std::vector<double> to_outside = squared_edt(f, outside);
+  // One exact transform per side asked for; the other side gets ∓ half a sample (its sign).
+  const bool want_in = side != DistanceSide::outside, want_out = side != DistanceSide::inside;
+  const std::vector<double> to_inside = want_out ? squared_edt(f, inside) : std::vector<double>{};
+  const std::vector<double> to_outside = want_in ? squared_edt(f, outside) : std::vector<double>{};
   Field3 s;
   s.n = f.n;
   s.h = f.h;
@@ -146,9 +148,9 @@ Field3 signed_distance(const Field3& f, float iso) {
   const double far = 1e6;
   for (std::size_t i = 0; i < f.v.size(); ++i) {
     if (inside[i])
-      s.v[i] = float(-(std::min(std::sqrt(to_outside[i]), far) - half));
+      s.v[i] = want_in ? float(-(std::min(std::sqrt(to_outside[i]), far) - half)) : float(-half);
     else
-      s.v[i] = float(std::min(std::sqrt(to_inside[i]), far) - half);
+      s.v[i] = want_out ? float(std::min(std::sqrt(to_inside[i]), far) - half) : float(half);
   }
   s.outside = float(far);
   return s;

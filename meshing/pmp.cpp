@@ -4,6 +4,7 @@
 
 #include "meshing/detail.h"
 
+#include <CGAL/Constrained_Delaunay_triangulation_2.h>
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Polygon_mesh_processing/angle_and_area_smoothing.h>
 #include <CGAL/Polygon_mesh_processing/border.h>
@@ -18,9 +19,12 @@
 #include <CGAL/Polygon_mesh_processing/tangential_relaxation.h>
 #include <CGAL/Polygon_mesh_processing/triangulate_hole.h>
 #include <CGAL/Surface_mesh.h>
+#include <CGAL/Triangulation_face_base_with_info_2.h>
+#include <CGAL/Triangulation_vertex_base_with_info_2.h>
 #include <CGAL/boost/graph/Euler_operations.h>
 
 #include <cmath>
+#include <map>
 #include <stdexcept>
 
 namespace organsmith::meshing_detail {
@@ -141,6 +145,69 @@ int collapse_needles(Mesh& m, const Mesh::Property_map<E, bool>& constrained, do
   return collapsed;
 }
 
+/// Isotropic remeshing leaves a few triangles with small angles where the sizing meets
+/// curvature; this improves them without moving the surface: flips between nearly coplanar
+/// triangles, collapses of needles, and angle-based smoothing projected back on the surface.
+/// Edges in the "e:constrained" map (and their vertices) are left alone.
+void improve_angles(Mesh& m, double min_angle_deg, double target_edge_mm, bool skip_fixed_faces = false) {
+  auto constrained = m.property_map<E, bool>("e:constrained").first;
+  // A flip between triangles that meet at up to 25° moves the surface by at most
+  // ≈ edge · tan(12.5°) / 4 ≈ 0.08 · edge where they meet: only in kinks of the field (thick
+  // slices), where the surface is no better defined than that.
+  for (int pass = 0; pass < 8; ++pass) {
+    int changes = improving_flips(m, constrained, pass < 2 ? 12.0 : 25.0);
+    changes += collapse_needles(m, constrained, min_angle_deg, 0.6 * target_edge_mm);
+    m.collect_garbage();
+    constrained = m.property_map<E, bool>("e:constrained").first;
+    auto vconstrained = m.add_property_map<V, bool>("v:constrained", false).first;
+    for (E e : m.edges())
+      if (constrained[e]) vconstrained[m.vertex(e, 0)] = vconstrained[m.vertex(e, 1)] = true;
+    // Angle smoothing: the whole surface once (it evens out the edge lengths too), then only
+    // around triangles near the angle bound (two rings of faces) — smoothing all of it every
+    // pass cost most of this function's time.
+    std::vector<F> near_bad;
+    if (pass == 0) {
+      for (F f : m.faces()) {
+        bool fixed = skip_fixed_faces;
+        for (V v : CGAL::vertices_around_face(m.halfedge(f), m)) fixed &= vconstrained[v];
+        if (!fixed) near_bad.push_back(f);
+      }
+    } else {
+      auto mark = m.add_property_map<F, bool>("f:near_bad", false).first;
+      std::vector<F> ring;
+      for (F f : m.faces())
+        if (face_min_angle(m, f) < min_angle_deg + 5.0) ring.push_back(f), mark[f] = true;
+      for (int r = 0; r < 2; ++r) {
+        std::vector<F> next;
+        for (F f : ring)
+          for (H h : CGAL::halfedges_around_face(m.halfedge(f), m))
+            for (F g : CGAL::faces_around_target(h, m))
+              if (g != Mesh::null_face() && !mark[g]) mark[g] = true, next.push_back(g);
+        ring.swap(next);
+      }
+      for (F f : m.faces())
+        if (mark[f]) near_bad.push_back(f);
+      m.remove_property_map(mark);
+    }
+    if (skip_fixed_faces) {
+      std::vector<F> movable;
+      for (F f : near_bad) {
+        bool fixed = true;
+        for (V v : CGAL::vertices_around_face(m.halfedge(f), m)) fixed &= vconstrained[v];
+        if (!fixed) movable.push_back(f);
+      }
+      near_bad.swap(movable);
+    }
+    if (!near_bad.empty())
+      PMP::angle_and_area_smoothing(near_bad, m, CGAL::parameters::number_of_iterations(2)
+                                                   .use_area_smoothing(false)
+                                                   .use_Delaunay_flips(false)
+                                                   .do_project(true)
+                                                   .vertex_is_constrained_map(vconstrained));
+    if (changes == 0) break;
+  }
+}
+
 }  // namespace
 
 SurfaceMesh repair_and_remesh(const SurfaceMesh& in, const RemeshParams& p, std::vector<std::string>& notes) {
@@ -191,53 +258,7 @@ SurfaceMesh repair_and_remesh(const SurfaceMesh& in, const RemeshParams& p, std:
                                .relax_constraints(true));
   m.collect_garbage();
 
-  // Isotropic remeshing leaves a few triangles with small angles where the sizing meets
-  // curvature; improve them without moving the surface: flips between nearly coplanar
-  // triangles, collapses of needles, and angle-based smoothing projected back on the surface.
-  const Mesh reference = m;
-  // A flip between triangles that meet at up to 25° moves the surface by at most
-  // ≈ edge · tan(12.5°) / 4 ≈ 0.08 · edge where they meet: only in kinks of the field (thick
-  // slices), where the surface is no better defined than that.
-  for (int pass = 0; pass < 8; ++pass) {
-    int changes = improving_flips(m, constrained, pass < 2 ? 12.0 : 25.0);
-    changes += collapse_needles(m, constrained, p.min_angle_deg, 0.6 * p.target_edge_mm);
-    m.collect_garbage();
-    constrained = m.property_map<E, bool>("e:constrained").first;
-    auto vconstrained = m.add_property_map<V, bool>("v:constrained", false).first;
-    for (E e : m.edges())
-      if (constrained[e]) vconstrained[m.vertex(e, 0)] = vconstrained[m.vertex(e, 1)] = true;
-    // Angle smoothing: the whole surface once (it evens out the edge lengths too), then only
-    // around triangles near the angle bound (two rings of faces) — smoothing all of it every
-    // pass cost most of this function's time.
-    std::vector<F> near_bad;
-    if (pass == 0) {
-      for (F f : m.faces()) near_bad.push_back(f);
-    } else {
-      auto mark = m.add_property_map<F, bool>("f:near_bad", false).first;
-      std::vector<F> ring;
-      for (F f : m.faces())
-        if (face_min_angle(m, f) < p.min_angle_deg + 5.0) ring.push_back(f), mark[f] = true;
-      for (int r = 0; r < 2; ++r) {
-        std::vector<F> next;
-        for (F f : ring)
-          for (H h : CGAL::halfedges_around_face(m.halfedge(f), m))
-            for (F g : CGAL::faces_around_target(h, m))
-              if (g != Mesh::null_face() && !mark[g]) mark[g] = true, next.push_back(g);
-        ring.swap(next);
-      }
-      for (F f : m.faces())
-        if (mark[f]) near_bad.push_back(f);
-      m.remove_property_map(mark);
-    }
-    if (!near_bad.empty())
-      PMP::angle_and_area_smoothing(near_bad, m, CGAL::parameters::number_of_iterations(2)
-                                                   .use_area_smoothing(false)
-                                                   .use_Delaunay_flips(false)
-                                                   .do_project(true)
-                                                   .vertex_is_constrained_map(vconstrained));
-    if (changes == 0) break;
-  }
-  (void)reference;
+  improve_angles(m, p.min_angle_deg, p.target_edge_mm);
 
   if (CGAL::is_closed(m) && !PMP::is_outward_oriented(m)) PMP::reverse_face_orientations(m);
   return from_cgal(std::move(m));
@@ -287,6 +308,152 @@ SurfaceMesh clip_slab(const SurfaceMesh& in, int axis, double lo, double hi) {
   if (!ok || !CGAL::is_closed(m))
     throw std::runtime_error("the flat cut of the surface did not close (the sampled surface self-intersects)");
   return canonical_order(from_cgal(std::move(m)));
+}
+
+SurfaceMesh tube_wall_from_surfaces(const SurfaceMesh& outer, const SurfaceMesh& lumen,
+                                    const std::vector<std::pair<int, double>>& planes, const RemeshParams& p) {
+  constexpr double kOnPlane = 1e-6;  // mm; clip_slab and the rim-constrained remeshing keep caps flat to this
+  auto on_plane = [&](const Eigen::Vector3d& q) {
+    for (std::size_t i = 0; i < planes.size(); ++i)
+      if (std::abs(q[planes[i].first] - planes[i].second) < kOnPlane) return int(i);
+    return -1;
+  };
+  auto cap_of = [&](const SurfaceMesh& s, const std::array<std::int32_t, 3>& t) {
+    const int a = on_plane(s.vertices_lps_mm[t[0]]);
+    return a >= 0 && on_plane(s.vertices_lps_mm[t[1]]) == a && on_plane(s.vertices_lps_mm[t[2]]) == a ? a : -1;
+  };
+  // The two tubes without their caps; the lumen turned inside out (its outside is the wall).
+  SurfaceMesh soup;
+  soup.vertices_lps_mm = outer.vertices_lps_mm;
+  soup.vertices_lps_mm.insert(soup.vertices_lps_mm.end(), lumen.vertices_lps_mm.begin(), lumen.vertices_lps_mm.end());
+  const auto shift = std::int32_t(outer.vertices_lps_mm.size());
+  std::size_t outer_caps = 0, lumen_caps = 0;
+  for (const auto& t : outer.triangles)
+    if (cap_of(outer, t) < 0) soup.triangles.push_back(t);
+    else ++outer_caps;
+  for (const auto& t : lumen.triangles)
+    if (cap_of(lumen, t) < 0) soup.triangles.push_back({t[0] + shift, t[2] + shift, t[1] + shift});
+    else ++lumen_caps;
+  if (outer_caps == 0 || lumen_caps == 0) throw std::runtime_error("tube wall: the surfaces have no flat caps to join");
+
+  // Per cut plane: the rims are the border edges on it; the annulus between them is their
+  // constrained Delaunay triangulation, faces at odd nesting depth (inside the outer rim,
+  // outside the lumen's).
+  std::map<std::pair<std::int32_t, std::int32_t>, int> directed;
+  for (const auto& t : soup.triangles)
+    for (int e = 0; e < 3; ++e) ++directed[{t[e], t[(e + 1) % 3]}];
+  using Vb = CGAL::Triangulation_vertex_base_with_info_2<std::int32_t, K>;
+  using Fb = CGAL::Constrained_triangulation_face_base_2<K, CGAL::Triangulation_face_base_with_info_2<int, K>>;
+  using CDT = CGAL::Constrained_Delaunay_triangulation_2<K, CGAL::Triangulation_data_structure_2<Vb, Fb>,
+                                                         CGAL::Exact_predicates_tag>;
+  const std::size_t tube_triangles = soup.triangles.size();
+  for (std::size_t pi = 0; pi < planes.size(); ++pi) {
+    const int axis = planes[pi].first, u = (axis + 1) % 3, w = (axis + 2) % 3;
+    CDT cdt;
+    std::map<std::int32_t, CDT::Vertex_handle> handle;
+    auto vh = [&](std::int32_t i) {
+      auto it = handle.find(i);
+      if (it != handle.end()) return it->second;
+      const auto& q = soup.vertices_lps_mm[i];
+      auto h = cdt.insert(K::Point_2(q[u], q[w]));
+      h->info() = i;
+      return handle[i] = h;
+    };
+    std::size_t rim_edges = 0;
+    for (const auto& [e, n] : directed) {
+      if (directed.count({e.second, e.first})) continue;  // interior edge
+      if (on_plane(soup.vertices_lps_mm[e.first]) != int(pi) || on_plane(soup.vertices_lps_mm[e.second]) != int(pi)) continue;
+      cdt.insert_constraint(vh(e.first), vh(e.second));
+      ++rim_edges;
+    }
+    if (rim_edges == 0) continue;
+    if (cdt.number_of_vertices() != handle.size())
+      throw std::runtime_error("tube wall: rim vertices coincide in the cap plane");
+    for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = -1;
+    std::vector<CDT::Face_handle> front{cdt.infinite_face()};
+    cdt.infinite_face()->info() = 0;
+    // Breadth-first by depth: a face's depth grows by one across each constrained edge.
+    for (int depth = 0; !front.empty(); ++depth) {
+      std::vector<CDT::Face_handle> next, queue = front;
+      while (!queue.empty()) {
+        const auto f = queue.back();
+        queue.pop_back();
+        for (int i = 0; i < 3; ++i) {
+          const auto g = f->neighbor(i);
+          if (g->info() != -1) continue;
+          if (cdt.is_constrained(CDT::Edge(f, i))) {
+            next.push_back(g);
+          } else {
+            g->info() = depth;
+            queue.push_back(g);
+          }
+        }
+      }
+      front.clear();
+      for (auto g : next)
+        if (g->info() == -1) g->info() = depth + 1, front.push_back(g);
+    }
+    // Faces at depth 1 lie between the rims; outward on this cap is ±axis, away from the wall.
+    double mid = 0;
+    for (const auto& q : soup.vertices_lps_mm) mid += q[axis];
+    mid /= double(soup.vertices_lps_mm.size());
+    const double out_sign = planes[pi].second < mid ? -1.0 : 1.0;
+    for (auto f = cdt.finite_faces_begin(); f != cdt.finite_faces_end(); ++f) {
+      if (f->info() % 2 != 1) continue;
+      std::array<std::int32_t, 3> t{f->vertex(0)->info(), f->vertex(1)->info(), f->vertex(2)->info()};
+      const auto &a = soup.vertices_lps_mm[t[0]], &b = soup.vertices_lps_mm[t[1]], &c = soup.vertices_lps_mm[t[2]];
+      if ((b - a).cross(c - a)[axis] * out_sign < 0) std::swap(t[1], t[2]);
+      soup.triangles.push_back(t);
+    }
+  }
+  if (soup.triangles.size() == tube_triangles) throw std::runtime_error("tube wall: no annular cap was made");
+
+  // Remesh the caps only: every edge that is not between two cap triangles is held.
+  // Only the vertices still used (the old caps' inner vertices are not).
+  std::vector<std::int64_t> index(soup.vertices_lps_mm.size(), -1);
+  std::vector<Point> points;
+  std::vector<std::array<std::size_t, 3>> polys;
+  for (const auto& t : soup.triangles) {
+    std::array<std::size_t, 3> poly{};
+    for (int j = 0; j < 3; ++j) {
+      if (index[t[j]] < 0) {
+        index[t[j]] = std::int64_t(points.size());
+        const auto& q = soup.vertices_lps_mm[t[j]];
+        points.emplace_back(q.x(), q.y(), q.z());
+      }
+      poly[j] = std::size_t(index[t[j]]);
+    }
+    polys.push_back(poly);
+  }
+  if (!PMP::is_polygon_soup_a_polygon_mesh(polys)) throw std::runtime_error("tube wall: the joined surface is not a manifold");
+  Mesh m;
+  PMP::polygon_soup_to_polygon_mesh(points, polys, m);
+  if (!CGAL::is_closed(m)) throw std::runtime_error("tube wall: the joined surface is not closed");
+  auto cap = m.add_property_map<F, bool>("f:cap", false).first;
+  std::vector<F> caps;
+  for (F f : m.faces()) {
+    int plane = -2;
+    for (V v : CGAL::vertices_around_face(m.halfedge(f), m)) {
+      const Point& q = m.point(v);
+      const int pl = on_plane(Eigen::Vector3d(q.x(), q.y(), q.z()));
+      plane = plane == -2 || plane == pl ? pl : -1;
+    }
+    if (plane >= 0) cap[f] = true, caps.push_back(f);
+  }
+  auto constrained = m.add_property_map<E, bool>("e:constrained", false).first;
+  for (E e : m.edges()) {
+    const H h = m.halfedge(e);
+    constrained[e] = !cap[m.face(h)] || !cap[m.face(m.opposite(h))];
+  }
+  PMP::isotropic_remeshing(caps, p.target_edge_mm, m,
+                           CGAL::parameters::number_of_iterations(p.iterations)
+                               .edge_is_constrained_map(constrained)
+                               .protect_constraints(true));
+  m.collect_garbage();
+  improve_angles(m, p.min_angle_deg, p.target_edge_mm, true);
+  if (!CGAL::is_closed(m)) throw std::runtime_error("tube wall: remeshing the caps opened the surface");
+  if (!PMP::is_outward_oriented(m)) PMP::reverse_face_orientations(m);
+  return from_cgal(std::move(m));
 }
 
 }  // namespace organsmith::meshing_detail

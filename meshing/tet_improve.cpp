@@ -5,9 +5,12 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
+#include <Eigen/QR>
+
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <tuple>
 #include <vector>
 
 namespace organsmith::meshing_detail {
@@ -200,109 +203,414 @@ int flip_tets(TetMesh& m, double min_dih, double max_re) {
   return flips;
 }
 
-TetImproveStats improve_tets(TetMesh& m, double min_dih, double max_re) {
-  TetImproveStats stats;
-  const std::size_t nv = m.vertices_lps_mm.size();
+namespace {
 
-  // Vertices on the boundary or on an interface between regions do not move freely. Where that
-  // surface is smooth around the vertex (not a cap rim, not where an interface meets the
-  // boundary) they may slide a little in its tangent plane: slide[v] is the unit normal there,
-  // zero where the vertex stays put. The normal comes from Σ n nᵀ over the surface triangles
-  // around the vertex; a second eigenvalue above 2 % of the first marks a crease or corner.
-  std::vector<char> fixed(nv, 0);
-  std::vector<Eigen::Vector3d> slide(nv, Eigen::Vector3d::Zero());
-  {
-    const auto faces = sorted_faces(m);
-    std::vector<Eigen::Matrix3d> nn(nv, Eigen::Matrix3d::Zero());
-    for_each_face(faces, [&](std::size_t i, std::size_t n) {
-      if (n == 1 || (n == 2 && m.region_ids[faces[i].second] != m.region_ids[faces[i + 1].second])) {
-        const auto& f = faces[i].first;
-        const Eigen::Vector3d normal = (m.vertices_lps_mm[f[1]] - m.vertices_lps_mm[f[0]])
-                                           .cross(m.vertices_lps_mm[f[2]] - m.vertices_lps_mm[f[0]])
-                                           .normalized();
-        for (auto v : f) fixed[v] = 1, nn[v] += normal * normal.transpose();
+/// How a vertex may move. Free: anywhere (interior). Slide: on a smooth piece of the boundary or
+/// of a region interface, within `radius` of where it started, following the quadric height field
+/// z = a x² + b xy + c y² fitted (in the frame t1, t2, n at p0) to its surface neighbours.
+/// Fixed: on a crease (cap rim), where surfaces of different kinds meet, or at a cone.
+struct Constraint {
+  enum Kind : char { free, slide, fixed } kind = free;
+  Eigen::Vector3d p0 = Eigen::Vector3d::Zero(), n = Eigen::Vector3d::Zero(), t1 = Eigen::Vector3d::Zero(),
+                  t2 = Eigen::Vector3d::Zero();
+  double radius = 0;
+  Eigen::Vector2d uv = Eigen::Vector2d::Zero();  ///< current tangent coordinates (slide)
+
+  std::vector<std::array<Eigen::Vector3d, 3>> ring;  ///< surface triangles around p0, local (x, y, z)
+
+  /// The point of the surface triangles around p0 above tangent coordinates q (q clamped to
+  /// `radius`): the vertex slides on the surface Mesh_3 made, not off it.
+  Eigen::Vector3d place(Eigen::Vector2d q) const {
+    const double r = q.norm();
+    if (r > radius) q *= radius / r;
+    for (int shrink = 0; shrink < 8; ++shrink, q *= 0.5)
+      for (const auto& t : ring) {
+        const Eigen::Vector2d a = t[0].head<2>(), b = t[1].head<2>(), c = t[2].head<2>();
+        const double det = (b - a).x() * (c - a).y() - (b - a).y() * (c - a).x();
+        if (std::abs(det) < 1e-300) continue;
+        const Eigen::Vector2d d = q - a;
+        const double l1 = (d.x() * (c - a).y() - d.y() * (c - a).x()) / det;
+        const double l2 = ((b - a).x() * d.y() - (b - a).y() * d.x()) / det;
+        const double l0 = 1.0 - l1 - l2;
+        const double eps = -1e-12;
+        if (l0 < eps || l1 < eps || l2 < eps) continue;
+        const double z = l0 * t[0].z() + l1 * t[1].z() + l2 * t[2].z();
+        return p0 + q.x() * t1 + q.y() * t2 + z * n;
       }
-    });
-    for (std::size_t v = 0; v < nv; ++v) {
-      if (!fixed[v]) continue;
-      Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(nn[v]);
-      const Eigen::Vector3d ev = es.eigenvalues();  // ascending
-      if (ev[2] > 0 && ev[1] < 0.02 * ev[2]) slide[v] = es.eigenvectors().col(2);
-    }
+    return p0;
   }
-  // Vertex relocation (the stars change after flips, so they are rebuilt each time).
-  auto smooth = [&] {
-    std::vector<std::vector<std::size_t>> star(nv);
-    for (std::size_t t = 0; t < m.tets.size(); ++t)
-      for (auto v : m.tets[t]) star[v].push_back(t);
+};
 
-    auto star_score = [&](std::int32_t v) {
+/// Surface faces are the boundary faces (one tet) and the faces between two regions. A vertex
+/// slides when every surface face around it is of one kind (same pair of sides), no surface edge
+/// around it bends by more than `feature_deg` and no face normal leaves the vertex normal by more
+/// than that; `slide_fraction` of the mean surface edge around it bounds how far it goes.
+std::vector<Constraint> classify(const TetMesh& m, double feature_deg, double slide_fraction) {
+  const auto& P = m.vertices_lps_mm;
+  const std::size_t nv = P.size();
+  struct SFace {
+    std::array<std::int32_t, 3> v;  // oriented: normal out of the side with the lower region id
+    std::int64_t kind;
+    Eigen::Vector3d normal;  // not normalised (twice the area)
+  };
+  std::vector<std::tuple<Face, std::size_t, int>> all;
+  all.reserve(4 * m.tets.size());
+  for (std::size_t t = 0; t < m.tets.size(); ++t)
+    for (int f = 0; f < 4; ++f) {
+      const auto& T = m.tets[t];
+      all.emplace_back(key(T[kFaces[f][0]], T[kFaces[f][1]], T[kFaces[f][2]]), t, f);
+    }
+  std::sort(all.begin(), all.end());
+  std::vector<SFace> faces;
+  for (std::size_t i = 0; i < all.size();) {
+    std::size_t j = i + 1;
+    while (j < all.size() && std::get<0>(all[j]) == std::get<0>(all[i])) ++j;
+    std::size_t t = std::get<1>(all[i]);
+    int f = std::get<2>(all[i]);
+    std::int64_t kind = -1;
+    if (j - i == 1) {
+      kind = std::int64_t(m.region_ids[t]) << 32;  // boundary of region r: (r, 0)
+    } else if (j - i == 2) {
+      const std::size_t u = std::get<1>(all[i + 1]);
+      std::int32_t r0 = m.region_ids[t], r1 = m.region_ids[u];
+      if (r0 != r1) {
+        if (r1 < r0) std::swap(r0, r1), t = u, f = std::get<2>(all[i + 1]);
+        kind = (std::int64_t(r0) << 32) | std::int64_t(std::uint32_t(r1) + 1);
+      }
+    }
+    if (kind >= 0) {
+      const auto& T = m.tets[t];
+      SFace s{{T[kFaces[f][0]], T[kFaces[f][1]], T[kFaces[f][2]]}, kind, Eigen::Vector3d::Zero()};
+      s.normal = (P[s.v[1]] - P[s.v[0]]).cross(P[s.v[2]] - P[s.v[0]]);
+      faces.push_back(s);
+    }
+    i = j;
+  }
+
+  std::vector<Constraint> c(nv);
+  std::vector<std::int64_t> kind_of(nv, -1);
+  std::vector<std::vector<std::size_t>> ring(nv);
+  for (std::size_t i = 0; i < faces.size(); ++i)
+    for (auto v : faces[i].v) {
+      ring[v].push_back(i);
+      if (c[v].kind == Constraint::free) c[v].kind = Constraint::slide;
+      if (kind_of[v] >= 0 && kind_of[v] != faces[i].kind) c[v].kind = Constraint::fixed;
+      kind_of[v] = faces[i].kind;
+    }
+  const double cos_feature = std::cos(feature_deg * M_PI / 180.0);
+  // Surface edges: two faces of one kind, bending by less than the feature angle.
+  std::vector<std::pair<std::pair<std::int32_t, std::int32_t>, std::size_t>> edges;
+  for (std::size_t i = 0; i < faces.size(); ++i)
+    for (int e = 0; e < 3; ++e) {
+      const auto a = faces[i].v[e], b = faces[i].v[(e + 1) % 3];
+      edges.push_back({{std::min(a, b), std::max(a, b)}, i});
+    }
+  std::sort(edges.begin(), edges.end());
+  for (std::size_t i = 0; i < edges.size();) {
+    std::size_t j = i + 1;
+    while (j < edges.size() && edges[j].first == edges[i].first) ++j;
+    bool sharp = j - i != 2;
+    if (!sharp) {
+      const SFace &f = faces[edges[i].second], &g = faces[edges[i + 1].second];
+      sharp = f.kind != g.kind || f.normal.normalized().dot(g.normal.normalized()) < cos_feature;
+    }
+    if (sharp) c[edges[i].first.first].kind = c[edges[i].first.second].kind = Constraint::fixed;
+    i = j;
+  }
+  for (std::size_t v = 0; v < nv; ++v) {
+    Constraint& k = c[v];
+    if (k.kind != Constraint::slide) continue;
+    k.p0 = P[v];
+    Eigen::Vector3d n = Eigen::Vector3d::Zero();
+    for (auto i : ring[v]) n += faces[i].normal;
+    if (n.norm() == 0) {
+      k.kind = Constraint::fixed;
+      continue;
+    }
+    n.normalize();
+    std::vector<std::int32_t> nb;
+    double edge = 0;
+    for (auto i : ring[v]) {
+      if (faces[i].normal.normalized().dot(n) < cos_feature) k.kind = Constraint::fixed;
+      for (auto w : faces[i].v)
+        if (w != std::int32_t(v) && std::find(nb.begin(), nb.end(), w) == nb.end()) nb.push_back(w);
+    }
+    if (k.kind != Constraint::slide || nb.size() < 3) {
+      k.kind = Constraint::fixed;
+      continue;
+    }
+    k.n = n;
+    // A tangent frame that depends on n only (deterministic).
+    const Eigen::Vector3d helper = std::abs(n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+    k.t1 = n.cross(helper).normalized();
+    k.t2 = n.cross(k.t1);
+    for (auto w : nb) edge += (P[w] - P[v]).norm();
+    edge /= double(nb.size());
+    for (auto i : ring[v]) {
+      std::array<Eigen::Vector3d, 3> local;
+      for (int j = 0; j < 3; ++j) {
+        const Eigen::Vector3d d = P[faces[i].v[j]] - P[v];
+        local[j] = Eigen::Vector3d(d.dot(k.t1), d.dot(k.t2), d.dot(n));
+      }
+      k.ring.push_back(local);
+    }
+    k.radius = slide_fraction * edge;
+  }
+  return c;
+}
+
+}  // namespace
+
+TetImproveStats improve_tets(TetMesh& m, double gate_dih, double gate_re) {
+  TetImproveStats stats;
+  // The repair aims past the gate (11° and 1.9 for the 10° / 2 gate): tets it leaves exactly
+  // at the gate would fail it by rounding once the mesh is moved to LPS, and a margin costs
+  // little. Measured on the four reference inputs (Mesh_3 output dumped before the repair;
+  // smallest dihedral / largest radius-edge after it, failing tets, repair seconds):
+  //   aim            phantom gallbladder   phantom trachea   real gallbladder   real trachea
+  //   10° / 2.0      10.00 / 2.000, 0      10.11 / 1.99, 0   10.01 / 2.00, 0    10.05 / 1.99, 0
+  //   11° / 1.9      10.68 / 1.905, 0      11.28 / 1.90, 0   11.00 / 1.90, 0    11.00 / 1.89, 0  (0.2–0.8 s)
+  //   12° / 1.8      11.03 / 1.98,  0      12.01 / 1.80, 0   12.01 / 1.80, 0    12.02 / 1.80, 0  (0.4–1.7 s)
+  // (Trachea dumps from the wall sampled on its own; on the wall now joined from the lumen and
+  // the outer offset, 11° / 1.9: phantom 11.02° / 1.90, real 11.19° / 1.90, none failing.)
+  // Peeling (below) removes only tets that fail the gate itself.
+  const double min_dih = 1.1 * gate_dih, max_re = 0.95 * gate_re;
+  // Feature angle between neighbouring surface triangles: the trachea's cap rims are 90°; the
+  // smooth organ surfaces and the gallbladder's inward offset (which creases where the offset
+  // folds) bend by less. With 40° the real gallbladder kept 5 tets above radius-edge 2 (2.04),
+  // with 25° 6; 60° cleared all four inputs. The old rule (second eigenvalue of Σ n nᵀ above 2 %
+  // of the first) froze 52 % of the phantom gallbladder's surface vertices (4019 of 7741) and
+  // 45 % of the real one's: every curved place, not only creases.
+  // Slides go at most a quarter of the mean surface edge around the vertex, on the surface
+  // triangles themselves; 0.4 gave no fewer failures and moved faces further off the surface.
+  const double feature_deg = 60.0, slide_fraction = 0.25;
+  std::vector<Constraint> con = classify(m, feature_deg, slide_fraction);
+
+  auto position_of = [&](std::int32_t v, const Eigen::Vector3d& u) {
+    return con[v].kind == Constraint::slide ? con[v].place(u.head<2>()) : u;
+  };
+
+  // Hill climbing on the worst tet of the vertex's star: pattern search over fixed directions
+  // (3D for interior vertices, the tangent plane for sliding ones) with a halving step, plus the
+  // star centroid. Returns true when the vertex moved.
+  auto optimise = [&](std::int32_t v, const std::vector<std::size_t>& star) {
+    Eigen::Vector3d& p = m.vertices_lps_mm[v];
+    auto star_score = [&] {
       double s = 1e300;
-      for (auto t : star[v]) s = std::min(s, tet_score(m, t, min_dih, max_re));
+      for (auto t : star) s = std::min(s, tet_score(m, t, min_dih, max_re));
       return s;
     };
+    const Eigen::Vector3d start = p;
+    double mean_edge = 0;
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    int count = 0;
+    for (auto t : star)
+      for (auto w : m.tets[t])
+        if (w != v) centroid += m.vertices_lps_mm[w], mean_edge += (m.vertices_lps_mm[w] - start).norm(), ++count;
+    centroid /= count;
+    mean_edge /= count;
+    const bool sliding = con[v].kind == Constraint::slide;
+    Eigen::Vector3d u = sliding ? Eigen::Vector3d(con[v].uv.x(), con[v].uv.y(), 0) : start;
+    double best = star_score();
+    const double start_score = best;
+    auto attempt = [&](const Eigen::Vector3d& cand) {
+      p = position_of(v, cand);
+      const double s = star_score();
+      if (s > best + 1e-12) {
+        best = s, u = cand;
+        return true;
+      }
+      return false;
+    };
+    {
+      const Eigen::Vector3d d = centroid - start;
+      for (double f : {1.0, 0.5, 0.25})
+        attempt(sliding ? Eigen::Vector3d(u.x() + f * d.dot(con[v].t1), u.y() + f * d.dot(con[v].t2), 0)
+                        : Eigen::Vector3d(start + f * d));
+    }
+    static const std::vector<Eigen::Vector3d> dirs3 = [] {
+      std::vector<Eigen::Vector3d> d;
+      for (int a = 0; a < 3; ++a)
+        for (int s : {-1, 1}) d.push_back(Eigen::Vector3d::Unit(a) * s);
+      for (int x : {-1, 1})
+        for (int y : {-1, 1})
+          for (int z : {-1, 1}) d.push_back(Eigen::Vector3d(x, y, z).normalized());
+      return d;
+    }();
+    static const std::vector<Eigen::Vector3d> dirs2 = [] {
+      std::vector<Eigen::Vector3d> d;
+      for (int k = 0; k < 8; ++k) d.emplace_back(std::cos(k * M_PI / 4), std::sin(k * M_PI / 4), 0);
+      return d;
+    }();
+    const auto& dirs = sliding ? dirs2 : dirs3;
+    double step = sliding ? 0.5 * con[v].radius : 0.25 * mean_edge;
+    const double min_step = 0.01 * mean_edge;
+    for (int it = 0; it < 60 && step > min_step; ++it) {
+      const Eigen::Vector3d base = u;
+      bool improved = false;
+      for (const auto& d : dirs) improved |= attempt(base + step * d);
+      if (!improved) step *= 0.5;
+    }
+    if (sliding) {
+      Eigen::Vector2d q = u.head<2>();
+      if (q.norm() > con[v].radius) q *= con[v].radius / q.norm();
+      con[v].uv = q;
+    }
+    p = position_of(v, u);
+    return best > start_score + 1e-12;
+  };
 
+  auto smooth = [&] {
+    std::vector<std::vector<std::size_t>> star(m.vertices_lps_mm.size());
+    for (std::size_t t = 0; t < m.tets.size(); ++t)
+      for (auto v : m.tets[t]) star[v].push_back(t);
     for (int pass = 0; pass < 6; ++pass) {
       std::vector<std::int32_t> candidates;
       for (std::size_t t = 0; t < m.tets.size(); ++t)
         if (tet_score(m, t, min_dih, max_re) < 1.0)
           for (auto v : m.tets[t])
-            if (!fixed[v] || slide[v].squaredNorm() > 0) candidates.push_back(v);
+            if (con[v].kind != Constraint::fixed) candidates.push_back(v);
       std::sort(candidates.begin(), candidates.end());
       candidates.erase(std::unique(candidates.begin(), candidates.end()), candidates.end());
-      if (candidates.empty()) break;
       int moved = 0;
-      for (auto v : candidates) {
-        Eigen::Vector3d& p = m.vertices_lps_mm[v];
-        const Eigen::Vector3d start = p;
-        double best = star_score(v);
-        Eigen::Vector3d best_p = p;
-        // Star centroid (Laplacian) and partial steps towards it.
-        Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
-        double mean_edge = 0;
-        int count = 0;
-        for (auto t : star[v])
-          for (auto w : m.tets[t])
-            if (w != v) {
-              centroid += m.vertices_lps_mm[w];
-              mean_edge += (m.vertices_lps_mm[w] - start).norm();
-              ++count;
-            }
-        centroid /= count;
-        mean_edge /= count;
-        std::vector<Eigen::Vector3d> tries;
-        for (double s : {1.0, 0.5, 0.25}) tries.push_back(start + s * (centroid - start));
-        for (double step : {0.15, 0.05})
-          for (int a = 0; a < 3; ++a)
-            for (int sgn : {-1, 1}) {
-              Eigen::Vector3d q = start;
-              q[a] += sgn * step * mean_edge;
-              tries.push_back(q);
-            }
-        if (fixed[v]) {
-          // Sliding on the surface: tangential, and at most a tenth of an edge (on a surface
-          // curved with radius R the vertex leaves it by ≤ d²/2R, about 0.001 mm at 1.5 mm edges and
-          // R = 10 mm).
-          const Eigen::Vector3d n = slide[v];
-          for (auto& q : tries) {
-            Eigen::Vector3d d = q - start;
-            d -= n * n.dot(d);
-            const double limit = 0.1 * mean_edge;
-            if (d.norm() > limit) d *= limit / d.norm();
-            q = start + d;
-          }
-        }
-        for (const auto& q : tries) {
-          p = q;
-          const double s = star_score(v);
-          if (s > best + 1e-9) best = s, best_p = q;
-        }
-        p = best_p;
-        if (best_p != start) ++moved;
-      }
+      for (auto v : candidates) moved += optimise(v, star[v]);
       stats.moved_vertices += moved;
       if (moved == 0) break;
     }
+  };
+
+  // Splits an edge of each failing tet at its midpoint when that (with the new vertex then
+  // placed at its best) raises the worst tet around the edge: the tets whose vertices all lie on
+  // surfaces (a wall one tet thick) get a vertex that can move. Inside a region the new vertex
+  // moves freely; on a smooth surface edge it slides on the two triangles the edge divides (the
+  // surface is unchanged); on a crease or where surfaces meet it stays at the midpoint.
+  // Returns the tets around (u, v) and the new vertex's constraint (none: the edge cannot split).
+  const double cos_feature = std::cos(feature_deg * M_PI / 180.0);
+  auto edge_ring = [&](const std::vector<Tet>& tets, const std::vector<std::int32_t>& regions,
+                       const std::vector<char>& alive, const std::vector<std::vector<std::size_t>>& star,
+                       std::int32_t u, std::int32_t v, Constraint& k) {
+    std::vector<std::size_t> ring;
+    for (auto t : star[u])
+      if (alive[t] && std::find(tets[t].begin(), tets[t].end(), v) != tets[t].end()) ring.push_back(t);
+    // Faces (u, v, x) with the ring tets on each side.
+    std::vector<std::pair<std::int32_t, std::size_t>> sides;
+    for (auto t : ring)
+      for (auto x : tets[t])
+        if (x != u && x != v) sides.emplace_back(x, t);
+    std::sort(sides.begin(), sides.end());
+    const auto& P = m.vertices_lps_mm;
+    std::vector<std::array<std::int32_t, 3>> surface;
+    std::vector<std::int64_t> kinds;
+    for (std::size_t i = 0; i < sides.size();) {
+      std::size_t j = i + 1;
+      while (j < sides.size() && sides[j].first == sides[i].first) ++j;
+      if (j - i > 2) return std::vector<std::size_t>{};
+      const std::int32_t r0 = regions[sides[i].second];
+      if (j - i == 1 || regions[sides[i + 1].second] != r0) {
+        surface.push_back({u, v, sides[i].first});
+        kinds.push_back(j - i == 1 ? std::int64_t(r0) << 32
+                                   : (std::int64_t(std::min(r0, regions[sides[i + 1].second])) << 32) |
+                                         std::int64_t(std::uint32_t(std::max(r0, regions[sides[i + 1].second])) + 1));
+      }
+      i = j;
+    }
+    k = Constraint{};
+    if (surface.empty()) return ring;
+    k.kind = Constraint::fixed;
+    if (surface.size() != 2 || kinds[0] != kinds[1]) return ring;
+    Eigen::Vector3d n0 = (P[surface[0][1]] - P[surface[0][0]]).cross(P[surface[0][2]] - P[surface[0][0]]).normalized();
+    Eigen::Vector3d n1 = (P[surface[1][1]] - P[surface[1][0]]).cross(P[surface[1][2]] - P[surface[1][0]]).normalized();
+    if (n0.dot(n1) < 0) n1 = -n1;
+    if (n0.dot(n1) < cos_feature) return ring;
+    k.kind = Constraint::slide;
+    k.p0 = 0.5 * (P[u] + P[v]);
+    k.n = (n0 + n1).normalized();
+    const Eigen::Vector3d helper = std::abs(k.n.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+    k.t1 = k.n.cross(helper).normalized();
+    k.t2 = k.n.cross(k.t1);
+    for (const auto& f : surface) {
+      std::array<Eigen::Vector3d, 3> local;
+      for (int j = 0; j < 3; ++j) {
+        const Eigen::Vector3d d = P[f[j]] - k.p0;
+        local[j] = Eigen::Vector3d(d.dot(k.t1), d.dot(k.t2), d.dot(k.n));
+      }
+      k.ring.push_back(local);
+    }
+    k.radius = slide_fraction * (P[u] - P[v]).norm();
+    return ring;
+  };
+
+  auto split = [&] {
+    std::vector<Tet> tets = m.tets;
+    std::vector<std::int32_t> regions = m.region_ids;
+    std::vector<char> alive(tets.size(), 1);
+    std::vector<std::vector<std::size_t>> star(m.vertices_lps_mm.size());
+    for (std::size_t t = 0; t < tets.size(); ++t)
+      for (auto v : tets[t]) star[v].push_back(t);
+    int splits = 0;
+    const std::size_t n0 = tets.size();
+    for (std::size_t t = 0; t < n0; ++t) {
+      if (!alive[t] || tet_score(m, t, min_dih, max_re) >= 1.0) continue;
+      double best_gain = 0;
+      std::vector<std::size_t> best_ring;
+      std::pair<std::int32_t, std::int32_t> best_edge;
+      Eigen::Vector3d best_p;
+      Constraint best_k;
+      for (int i = 0; i < 4; ++i)
+        for (int j = i + 1; j < 4; ++j) {
+          const std::int32_t u = tets[t][i], v = tets[t][j];
+          Constraint k;
+          const auto ring = edge_ring(tets, regions, alive, star, u, v, k);
+          if (ring.empty()) continue;
+          double worst_old = 1e300;
+          for (auto r : ring) worst_old = std::min(worst_old, tet_score(m, r, min_dih, max_re));
+          // Trial: append the vertex and the 2·|ring| tets to m, optimise, then take them off.
+          const auto w = std::int32_t(m.vertices_lps_mm.size());
+          m.vertices_lps_mm.push_back(0.5 * (m.vertices_lps_mm[u] + m.vertices_lps_mm[v]));
+          con.push_back(k);
+          std::vector<std::size_t> new_star;
+          for (auto r : ring) {
+            Tet a = tets[r], b = tets[r];
+            std::replace(a.begin(), a.end(), v, w);
+            std::replace(b.begin(), b.end(), u, w);
+            new_star.push_back(m.tets.size()), m.tets.push_back(a);
+            new_star.push_back(m.tets.size()), m.tets.push_back(b);
+          }
+          optimise(w, new_star);
+          double worst_new = 1e300;
+          for (auto r : new_star) worst_new = std::min(worst_new, tet_score(m, r, min_dih, max_re));
+          const double gain = worst_new - worst_old;
+          if (gain > best_gain + 1e-9)
+            best_gain = gain, best_ring = ring, best_edge = {u, v}, best_p = m.vertices_lps_mm[w], best_k = con.back();
+          m.tets.resize(m.tets.size() - 2 * ring.size());
+          m.vertices_lps_mm.pop_back();
+          con.pop_back();
+        }
+      if (best_ring.empty()) continue;
+      const auto w = std::int32_t(m.vertices_lps_mm.size());
+      m.vertices_lps_mm.push_back(best_p);
+      con.push_back(best_k);
+      star.emplace_back();
+      for (auto r : best_ring) {
+        alive[r] = 0;
+        Tet a = tets[r], b = tets[r];
+        std::replace(a.begin(), a.end(), best_edge.second, w);
+        std::replace(b.begin(), b.end(), best_edge.first, w);
+        for (const Tet& n : {a, b}) {
+          tets.push_back(n), regions.push_back(regions[r]), alive.push_back(1);
+          for (auto x : n) star[x].push_back(tets.size() - 1);
+        }
+      }
+      // m.tets must follow `tets` for the scores above: rebuild it now (cheap: few splits).
+      m.tets = tets;
+      m.region_ids = regions;
+      ++splits;
+    }
+    m.tets.clear();
+    m.region_ids.clear();
+    for (std::size_t t = 0; t < tets.size(); ++t)
+      if (alive[t]) m.tets.push_back(tets[t]), m.region_ids.push_back(regions[t]);
+    return splits;
   };
 
   smooth();
@@ -310,6 +618,14 @@ TetImproveStats improve_tets(TetMesh& m, double min_dih, double max_re) {
     const int flips = flip_tets(m, min_dih, max_re);
     stats.flips += flips;
     if (flips == 0) break;
+    smooth();
+  }
+  for (int round = 0; round < 3; ++round) {
+    const int splits = split();
+    stats.splits += splits;
+    if (splits == 0) break;
+    smooth();
+    stats.flips += flip_tets(m, min_dih, max_re);
     smooth();
   }
 
@@ -323,7 +639,7 @@ TetImproveStats improve_tets(TetMesh& m, double min_dih, double max_re) {
     std::vector<char> drop(m.tets.size(), 0);
     int peeled = 0;
     for (std::size_t t = 0; t < m.tets.size(); ++t)
-      if (boundary[t] >= 2 && tet_score(m, t, min_dih, max_re) < 1.0) drop[t] = 1, ++peeled;
+      if (boundary[t] >= 2 && tet_score(m, t, gate_dih, gate_re) < 1.0) drop[t] = 1, ++peeled;
     if (peeled == 0) break;
     std::vector<std::array<std::int32_t, 4>> tets;
     std::vector<std::int32_t> regions;
@@ -335,6 +651,7 @@ TetImproveStats improve_tets(TetMesh& m, double min_dih, double max_re) {
   }
 
   // Drop vertices no tet uses any more (peeled tets can leave some), keeping the others' order.
+  const std::size_t nv = m.vertices_lps_mm.size();
   std::vector<char> used(nv, 0);
   for (const auto& T : m.tets)
     for (auto v : T) used[v] = 1;

@@ -10,6 +10,7 @@ struct TetImproveStats {
   int moved_vertices = 0;
   int peeled_tets = 0;
   int flips = 0;  ///< 2-3 and 3-2 flips taken
+  int splits = 0;  ///< interior edges split at their midpoint
 };
 
 /// Moves interior vertices (boundary and region-interface vertices only tangentially, a tenth of

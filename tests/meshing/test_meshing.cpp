@@ -6,6 +6,7 @@
 #include "meshing/export.h"
 #include "meshing/mesh.h"
 #include "meshing/quality.h"
+#include "meshing/detail.h"
 #include "meshing/tet_improve.h"
 #include "pipeline/image_io.h"
 #include "pipeline/phantom.h"
@@ -65,19 +66,19 @@ void expect_guarantees(const NamedSurface& s) {
   EXPECT_NEAR(again.volume_mm3, s.mesh.signed_volume_mm3(), 1e-6 * std::abs(again.volume_mm3) + 1e-9);
 }
 
-/// The tetrahedral quality gate. The project asks for a smallest dihedral angle ≥ 10° and a
-/// radius-edge ratio ≤ 2 on every tet; CGAL Mesh_3 (perturb to 8°, exude to 12°) followed by
-/// organsmith's local repair (interior vertex moves, tangential slides of smooth boundary and
-/// interface vertices, 2-3/3-2 flips, boundary peeling) reaches that for all but ≈ 0.05 % of the
-/// tets. The bounds below hold the figures reached (phantom gallbladder 8.43°, 2.33; trachea down
-/// to its division 10°, 2.50; real references 9.15°, 2.38) — NOT the thresholds; raise
-/// them to 10° / 2 once the remaining tets are fixed.
-void expect_tet_gate_as_reached(const TetQuality& q) {
+/// The tetrahedral quality gate, as the project states it: every tet's smallest dihedral angle
+/// ≥ 10°, radius-edge ratio ≤ 2, none inverted or flat. CGAL Mesh_3 (perturb to 8°, exude to
+/// 12°) leaves 0.1–0.5 % of the tets below it, nearly all with every vertex on the boundary or
+/// the wall/body interface; organsmith's repair (slides on the surface, moves, flips, edge
+/// splits; see tet_improve.cpp) aims at 11° / 1.9 and reaches 10.7–11.3° / ≤ 1.905 on the
+/// phantom and the real references.
+void expect_tet_gate(const TetQuality& q) {
   EXPECT_EQ(q.inverted_or_flat, 0);
-  EXPECT_GE(q.dihedral_min_deg, 8.2);
-  EXPECT_LE(q.radius_edge_max, 2.6);
-  EXPECT_LE(double(q.below_min_dihedral + q.above_max_radius_edge), 0.003 * double(q.tets))
-      << q.below_min_dihedral << " tets below 10°, " << q.above_max_radius_edge << " above radius-edge 2";
+  EXPECT_GE(q.dihedral_min_deg, 10.0);
+  EXPECT_LE(q.radius_edge_max, 2.0);
+  EXPECT_EQ(q.below_min_dihedral, 0) << "tets below 10°";
+  EXPECT_EQ(q.above_max_radius_edge, 0) << "tets above radius-edge 2";
+  EXPECT_TRUE(q.ok());
 }
 
 const NamedSurface* find_surface(const OrganMesh& o, const std::string& name) {
@@ -182,6 +183,19 @@ TEST_F(PhantomMeshes, TracheaIsATubeWithFlatCapsAndAClosedLumen) {
   std::size_t on_caps = 0;
   for (const auto& v : wall->mesh.vertices_lps_mm) on_caps += std::abs(v.z() - wmin) < 1e-6 || std::abs(v.z() - wmax) < 1e-6;
   EXPECT_GT(on_caps, 20u);
+  // The wall is built from the lumen surface (its inner tube is the lumen, vertex for vertex)
+  // and the outer offset surface, not sampled again on its own.
+  for (const auto& w : tr->warnings) EXPECT_EQ(w.find("wall sampled on its own"), std::string::npos) << w;
+  std::set<std::array<double, 3>> wall_points;
+  for (const auto& v : wall->mesh.vertices_lps_mm) wall_points.insert({v.x(), v.y(), v.z()});
+  std::size_t lumen_side = 0, shared = 0;
+  for (const auto& v : lumen->mesh.vertices_lps_mm) {
+    if (std::abs(v.z() - zmin) < 1e-6 || std::abs(v.z() - zmax) < 1e-6) continue;  // lumen caps are not in the wall
+    ++lumen_side;
+    shared += wall_points.count({v.x(), v.y(), v.z()});
+  }
+  EXPECT_GT(lumen_side, 1000u);
+  EXPECT_EQ(shared, lumen_side) << "lumen vertices missing from the wall's inner tube";
   // The wall encloses (outer − lumen) ≈ perimeter × thickness × length; at least it is positive
   // and smaller than the full outer tube.
   EXPECT_GT(wall->mesh.signed_volume_mm3(), 0.5 * lumen->quality.area_mm2 * tr->spec.wall_mm);
@@ -196,7 +210,7 @@ TEST_F(PhantomMeshes, TetrahedraArePositiveAndMeetTheQualityGate) {
     const TetQuality& q = organ.volume_quality;
     ASSERT_GT(q.tets, 1000);
     for (std::size_t t = 0; t < organ.volume.tets.size(); ++t) ASSERT_GT(organ.volume.tet_volume_mm3(t), 0.0);
-    expect_tet_gate_as_reached(q);
+    expect_tet_gate(q);
   }
 }
 
@@ -309,6 +323,78 @@ TEST(TetRepair, FlipReplacesTwoFlatTetsByThreeBetterOnesKeepingVolumeAndBoundary
   EXPECT_EQ(boundary, expected);
 }
 
+TEST(TubeWall, JoinRefusesSurfacesWithoutCapsOnThePlanes) {
+  // The join needs flat caps on the given planes; without them it must throw (mesh_organs then
+  // samples the wall on its own and says so) rather than return an open or partial surface.
+  SurfaceMesh tet;
+  tet.vertices_lps_mm = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  tet.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  SurfaceMesh big = tet;
+  for (auto& v : big.vertices_lps_mm) v = 3.0 * v - Eigen::Vector3d::Constant(1.0);
+  meshing_detail::RemeshParams rp;
+  EXPECT_THROW(meshing_detail::tube_wall_from_surfaces(big, tet, {{2, 0.5}}, rp), std::runtime_error);
+  EXPECT_THROW(meshing_detail::tube_wall_from_surfaces(big, tet, {}, rp), std::runtime_error);
+}
+
+TEST(TetRepair, WallOneTetThickIsRepairedBySlidingOnItsCurvedSurfaces) {
+  // A curved wall one tet thick, like the gallbladder wall: a 12×8×1 block of unit cubes (6 tets
+  // each) bent onto a cylinder shell (inner radius 4 mm, 1 mm thick; neighbouring surface
+  // triangles bend by ≈ 14°). Every vertex lies on the boundary, so only slides on the smooth
+  // surfaces, flips and splits can repair it. The inner and outer surface vertices are jittered
+  // along their cylinders; the rims (where the cylinders meet the flat sides) and the sides are not.
+  const int nx = 12, ny = 8;
+  const double R = 4.0;
+  TetMesh m;
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> jitter(-0.3, 0.3);
+  std::vector<char> on_side;  // on a flat side (a rim vertex): must not move
+  auto id = [&](int i, int j, int k) { return std::int32_t(i + (nx + 1) * (j + (ny + 1) * k)); };
+  for (int k = 0; k <= 1; ++k)
+    for (int j = 0; j <= ny; ++j)
+      for (int i = 0; i <= nx; ++i) {
+        const bool side = i == 0 || i == nx || j == 0 || j == ny;
+        const double a = (i + (side ? 0.0 : jitter(rng))) / R, y = j + (side ? 0.0 : jitter(rng));
+        const double r = R + k;
+        m.vertices_lps_mm.emplace_back(r * std::cos(a), y, r * std::sin(a));
+        on_side.push_back(side);
+      }
+  static const int kCube[6][4] = {{0, 1, 3, 7}, {0, 3, 2, 7}, {0, 2, 6, 7}, {0, 6, 4, 7}, {0, 4, 5, 7}, {0, 5, 1, 7}};
+  for (int j = 0; j < ny; ++j)
+    for (int i = 0; i < nx; ++i) {
+      std::int32_t c[8];
+      for (int b = 0; b < 8; ++b) c[b] = id(i + (b & 1), j + ((b >> 1) & 1), (b >> 2) & 1);
+      for (const auto& t : kCube) {
+        m.tets.push_back({c[t[0]], c[t[1]], c[t[2]], c[t[3]]});
+        if (m.tet_volume_mm3(m.tets.size() - 1) < 0) std::swap(m.tets.back()[2], m.tets.back()[3]);
+        m.region_ids.push_back(2);
+      }
+    }
+  for (std::size_t t = 0; t < m.tets.size(); ++t) ASSERT_GT(m.tet_volume_mm3(t), 0.0) << "set-up";
+  const TetMesh before = m;
+  const TetQuality q0 = measure_tets(m, TetGuarantees{});
+  ASSERT_GT(q0.below_min_dihedral + q0.above_max_radius_edge, 10) << "the set-up must start well below the gate";
+
+  const auto stats = meshing_detail::improve_tets(m, 10.0, 2.0);
+  EXPECT_EQ(stats.peeled_tets, 0);
+  const TetQuality q1 = measure_tets(m, TetGuarantees{});
+  EXPECT_TRUE(q1.ok()) << q1.below_min_dihedral << " tets below 10° (smallest " << q1.dihedral_min_deg << "°), "
+                       << q1.above_max_radius_edge << " above radius-edge 2 (largest " << q1.radius_edge_max << ")";
+  // The original vertices keep their numbers (splits append); rim vertices stay put; surface
+  // vertices stay on the triangles they started on, i.e. within the chord height (≈ 0.06 mm
+  // for 1.4 mm triangle edges on a 4 mm radius) of their cylinder.
+  ASSERT_GE(m.vertices_lps_mm.size(), before.vertices_lps_mm.size());
+  for (std::size_t v = 0; v < before.vertices_lps_mm.size(); ++v) {
+    const Eigen::Vector3d &p = m.vertices_lps_mm[v], &p0 = before.vertices_lps_mm[v];
+    if (on_side[v]) {
+      EXPECT_EQ(p, p0) << "rim vertex " << v << " moved";
+      continue;
+    }
+    const double r0 = std::hypot(p0.x(), p0.z()), r = std::hypot(p.x(), p.z());
+    EXPECT_NEAR(r, r0, 0.07) << "surface vertex " << v << " left its cylinder";
+  }
+  EXPECT_NEAR(m.volume_mm3(), before.volume_mm3(), 0.01 * before.volume_mm3());
+}
+
 TEST_F(PhantomMeshes, ExportsRoundTripThroughIndependentReaders) {
   ScratchDir dir("meshing-export");
   ExportOptions eo;
@@ -414,7 +500,7 @@ TEST(MeshingRealData, GallbladderReferenceMeetsEveryGuarantee) {
   const OrganMeshes m = mesh_organs(lm, o, progress);
   ASSERT_EQ(m.organs.size(), 1u);
   for (const auto& s : m.organs[0].surfaces) expect_guarantees(s);
-  expect_tet_gate_as_reached(m.organs[0].volume_quality);
+  expect_tet_gate(m.organs[0].volume_quality);
 }
 
 TEST(MeshingRealData, TracheaReferenceMeetsEveryGuarantee) {
@@ -429,7 +515,7 @@ TEST(MeshingRealData, TracheaReferenceMeetsEveryGuarantee) {
   const OrganMeshes m = mesh_organs(lm, o, progress);
   ASSERT_EQ(m.organs.size(), 1u);
   for (const auto& s : m.organs[0].surfaces) expect_guarantees(s);
-  expect_tet_gate_as_reached(m.organs[0].volume_quality);
+  expect_tet_gate(m.organs[0].volume_quality);
 }
 
 TEST(MeshingBadInput, ClearErrorsNamingTheOrgan) {
@@ -503,9 +589,8 @@ TEST(MeshingCli, WritesEveryFormatAndRejectsNonNifti) {
                                                      (dir.path() / "surfaces").string());
   ASSERT_EQ(surfaces.exit_code, 0) << surfaces.output;
   EXPECT_TRUE(fs::exists(dir.path() / "surfaces" / "gallbladder" / "gallbladder.stl"));
-  // With tetrahedra a few tets still miss the 10° / 2 gate (see expect_tet_gate_as_reached):
-  // written only when asked to, and quality.json then says so.
-  const auto r = organsmith::testing::run_cli("mesh " + labels.string() + " --organ gallbladder=1 --allow-quality-failures --out " +
+  // With tetrahedra the enforced gate (10° / 2) passes too: exit 0 without any override.
+  const auto r = organsmith::testing::run_cli("mesh " + labels.string() + " --organ gallbladder=1 --out " +
                                               (dir.path() / "out").string());
   ASSERT_EQ(r.exit_code, 0) << r.output;
   for (const char* f : {"gallbladder.stl", "gallbladder.obj", "gallbladder.ply", "gallbladder.vtp", "gallbladder.vtu",
@@ -515,6 +600,7 @@ TEST(MeshingCli, WritesEveryFormatAndRejectsNonNifti) {
   const auto q = nlohmann::json::parse(qf);
   for (const auto& [name, sq] : q.at("surfaces").items()) EXPECT_TRUE(sq.at("passed").get<bool>()) << name;
   EXPECT_GT(q.at("tetrahedra").at("tetrahedra").get<int>(), 1000);
+  EXPECT_TRUE(q.at("tetrahedra").at("passed").get<bool>());
   // Not a label map: clear error, nothing written.
   std::ofstream(dir.path() / "notes.txt") << "not an image\n";
   const auto bad = organsmith::testing::run_cli("mesh " + (dir.path() / "notes.txt").string() + " --out " +
