@@ -83,6 +83,15 @@ void for_each_face(const std::vector<std::pair<Face, std::size_t>>& f, Run run) 
   }
 }
 
+/// Writes the live tets of a working copy (and their regions) back to `m`, in order.
+void keep_live(TetMesh& m, const std::vector<Tet>& tets, const std::vector<std::int32_t>& regions,
+               const std::vector<char>& alive) {
+  m.tets.clear();
+  m.region_ids.clear();
+  for (std::size_t t = 0; t < tets.size(); ++t)
+    if (alive[t]) m.tets.push_back(tets[t]), m.region_ids.push_back(regions[t]);
+}
+
 }  // namespace
 
 int flip_tets(TetMesh& m, double min_dih, double max_re) {
@@ -196,10 +205,7 @@ int flip_tets(TetMesh& m, double min_dih, double max_re) {
     ++flips;
   }
 
-  m.tets.clear();
-  m.region_ids.clear();
-  for (std::size_t t = 0; t < tets.size(); ++t)
-    if (alive[t]) m.tets.push_back(tets[t]), m.region_ids.push_back(regions[t]);
+  keep_live(m, tets, regions, alive);
   return flips;
 }
 
@@ -606,10 +612,7 @@ TetImproveStats improve_tets(TetMesh& m, double gate_dih, double gate_re) {
       m.region_ids = regions;
       ++splits;
     }
-    m.tets.clear();
-    m.region_ids.clear();
-    for (std::size_t t = 0; t < tets.size(); ++t)
-      if (alive[t]) m.tets.push_back(tets[t]), m.region_ids.push_back(regions[t]);
+    keep_live(m, tets, regions, alive);
     return splits;
   };
 
