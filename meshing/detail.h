@@ -72,6 +72,7 @@ struct RemeshParams {
   int iterations = 6;
   double min_angle_deg = 25.0;     ///< angle improvement works on triangles below this
   double feature_angle_deg = 0.0;  ///< > 0: keep edges sharper than this (cap rims) as constraints
+  std::function<void(const char* step, double seconds)> on_step;  ///< optional: wall time of each phase
 };
 
 /// The surface pipeline after sampling: keeps the largest component, fills holes, remeshes

@@ -64,6 +64,13 @@ struct NamedSurface {
   SurfaceQuality quality;
 };
 
+/// One timed step of meshing an organ: wall-clock seconds since `mesh_organs` started (the
+/// steps of one organ overlap where they run side by side). For benchmarks; not exported.
+struct MeshStepTime {
+  std::string step;
+  double start_s = 0.0, end_s = 0.0;
+};
+
 /// Everything built for one organ.
 struct OrganMesh {
   MeshOrganSpec spec;
@@ -76,6 +83,7 @@ struct OrganMesh {
   double voxel_diagonal_mm = 0.0;
   std::vector<std::string> warnings;       ///< e.g. "touches the image border; capped flat"
   double seconds_surface = 0.0, seconds_tets = 0.0;
+  std::vector<MeshStepTime> steps;         ///< per-step timeline, in the order the steps ended
 };
 
 struct OrganMeshes {

@@ -14,6 +14,7 @@
 #include <vtkUnsignedCharArray.h>
 #include <vtkPointData.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -88,6 +89,23 @@ int main(int argc, char** argv) {
   std::size_t tris = 0;
   for (const auto& o : a.organs)
     for (const auto& m : o.surfaces) tris += m.mesh.triangles.size();
+  // The timeline of the surfaces run: which step of which organ ran when (seconds since the
+  // start of mesh_organs; the steps of an organ's two branches overlap).
+  std::printf("timeline (surfaces run)  start    end   wall\n");
+  for (const auto& o : a.organs) {
+    auto steps = o.steps;
+    std::stable_sort(steps.begin(), steps.end(), [](const auto& x, const auto& y) { return x.start_s < y.start_s; });
+    for (const auto& st : steps)
+      std::printf("  %-11s %-34s %5.2f  %5.2f  %5.2f\n", o.spec.name.c_str(), st.step.c_str(), st.start_s, st.end_s,
+                  st.end_s - st.start_s);
+  }
+  for (const auto& o : a.organs)
+    for (const auto& m : o.surfaces) {
+      const auto& q = m.quality;
+      std::printf("  %-24s %6lld triangles, %5.1f %% edges ±25 %%, min angle %5.2f°, volume error %+.2f %%, HD95 %.3f mm%s\n",
+                  m.name.c_str(), (long long)q.triangles, 100 * q.edge_within_tolerance, q.angle_min_deg,
+                  100 * q.volume_error, q.hd95_mm, q.ok() ? "" : " FAILS");
+    }
 
   MeshOptions full;
   full.enforce_quality = false;
