@@ -7,11 +7,9 @@
 
 #include <Eigen/Geometry>
 #include <spdlog/spdlog.h>
-#include <vtkActor2D.h>
 #include <vtkArrowSource.h>
 #include <vtkCallbackCommand.h>
 #include <vtkCamera.h>
-#include <vtkCellArray.h>
 #include <vtkCommand.h>
 #include <vtkFloatArray.h>
 #include <vtkInteractorStyleTrackballCamera.h>
@@ -21,7 +19,6 @@
 #include <vtkPointData.h>
 #include <vtkPoints.h>
 #include <vtkPolyDataMapper.h>
-#include <vtkPolyDataMapper2D.h>
 #include <vtkProp3D.h>
 #include <vtkProperty.h>
 #include <vtkProperty2D.h>
@@ -641,21 +638,7 @@ void run_preview(const SnapshotScene& scene, const PreviewOptions& options, cons
   auto bar_pts = Ptr<vtkPoints>::New();
   bar_pts->SetNumberOfPoints(4);
   for (int i = 0; i < 4; ++i) bar_pts->SetPoint(i, 0, 0, 0);
-  auto bar_lines = Ptr<vtkCellArray>::New();
-  const vtkIdType l0[2] = {0, 1}, l1[2] = {0, 2}, l2[2] = {1, 3};
-  bar_lines->InsertNextCell(2, l0);
-  bar_lines->InsertNextCell(2, l1);
-  bar_lines->InsertNextCell(2, l2);
-  auto bar_pd = Ptr<vtkPolyData>::New();
-  bar_pd->SetPoints(bar_pts);
-  bar_pd->SetLines(bar_lines);
-  auto bar_mapper = Ptr<vtkPolyDataMapper2D>::New();
-  bar_mapper->SetInputData(bar_pd);
-  auto bar = Ptr<vtkActor2D>::New();
-  bar->SetMapper(bar_mapper);
-  bar->GetProperty()->SetColor(0.95, 0.95, 0.95);
-  bar->GetProperty()->SetLineWidth(3);
-  r->AddViewProp(bar);
+  r->AddViewProp(scale_bar_actor(bar_pts, Rgb{0.95, 0.95, 0.95}));
   auto bar_label = text("", std::max(10, options.height_px / 50), Rgb{0.95, 0.95, 0.95}, 0, 0, 0, 0);
   r->AddViewProp(bar_label);
   state.bar_points = bar_pts;

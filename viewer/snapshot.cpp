@@ -23,7 +23,6 @@
 #include <vtkPlotPoints.h>
 #include <vtkPoints.h>
 #include <vtkPolyDataMapper.h>
-#include <vtkPolyDataMapper2D.h>
 #include <vtkProperty.h>
 #include <vtkProperty2D.h>
 #include <vtkRendererCollection.h>
@@ -129,43 +128,10 @@ void add_legend(vtkRenderer* r, const std::vector<std::pair<std::string, Rgb>>& 
   if (!entries.empty()) {  // a pale backdrop keeps the names readable over surfaces and paths
     const double x0 = x - 0.4 * font, x1 = vw - 0.005 * vw, y1 = y + sw + 0.4 * font,
                  y0 = y - line * double(entries.size() - 1) - 0.4 * font;
-    auto pts = Ptr<vtkPoints>::New();
-    pts->InsertNextPoint(x0, y0, 0);
-    pts->InsertNextPoint(x1, y0, 0);
-    pts->InsertNextPoint(x1, y1, 0);
-    pts->InsertNextPoint(x0, y1, 0);
-    auto poly = Ptr<vtkCellArray>::New();
-    const vtkIdType q[4] = {0, 1, 2, 3};
-    poly->InsertNextCell(4, q);
-    auto pd = Ptr<vtkPolyData>::New();
-    pd->SetPoints(pts);
-    pd->SetPolys(poly);
-    auto m = Ptr<vtkPolyDataMapper2D>::New();
-    m->SetInputData(pd);
-    auto a = Ptr<vtkActor2D>::New();
-    a->SetMapper(m);
-    a->GetProperty()->SetColor(1, 1, 1);
-    a->GetProperty()->SetOpacity(0.8);
-    r->AddViewProp(a);
+    r->AddViewProp(rect_2d(x0, y0, x1, y1, Rgb{1, 1, 1}, 0.8));
   }
   for (const auto& [name, colour] : entries) {
-    auto pts = Ptr<vtkPoints>::New();
-    pts->InsertNextPoint(x, y, 0);
-    pts->InsertNextPoint(x + sw, y, 0);
-    pts->InsertNextPoint(x + sw, y + sw, 0);
-    pts->InsertNextPoint(x, y + sw, 0);
-    auto poly = Ptr<vtkCellArray>::New();
-    const vtkIdType q[4] = {0, 1, 2, 3};
-    poly->InsertNextCell(4, q);
-    auto pd = Ptr<vtkPolyData>::New();
-    pd->SetPoints(pts);
-    pd->SetPolys(poly);
-    auto m = Ptr<vtkPolyDataMapper2D>::New();
-    m->SetInputData(pd);
-    auto a = Ptr<vtkActor2D>::New();
-    a->SetMapper(m);
-    a->GetProperty()->SetColor(colour.r, colour.g, colour.b);
-    r->AddViewProp(a);
+    r->AddViewProp(rect_2d(x, y, x + sw, y + sw, colour));
     r->AddViewProp(text(name, font, text_colour, x + sw * 1.6, y + sw * 0.5, 0, 1));
     y -= line;
   }

@@ -359,6 +359,44 @@ Ptr<vtkTextActor> text(const std::string& s, int font_px, const Rgb& colour, dou
   return t;
 }
 
+namespace {
+
+/// A 2D actor of `points` joined by `cells` (two-point lines, or polygons when `filled`).
+Ptr<vtkActor2D> actor_2d(vtkPoints* points, const std::vector<std::vector<vtkIdType>>& cells, bool filled,
+                         const Rgb& colour) {
+  auto ca = Ptr<vtkCellArray>::New();
+  for (const auto& c : cells) ca->InsertNextCell(vtkIdType(c.size()), c.data());
+  auto pd = Ptr<vtkPolyData>::New();
+  pd->SetPoints(points);
+  if (filled) pd->SetPolys(ca);
+  else pd->SetLines(ca);
+  auto mapper = Ptr<vtkPolyDataMapper2D>::New();
+  mapper->SetInputData(pd);
+  auto actor = Ptr<vtkActor2D>::New();
+  actor->SetMapper(mapper);
+  actor->GetProperty()->SetColor(colour.r, colour.g, colour.b);
+  return actor;
+}
+
+}  // namespace
+
+Ptr<vtkActor2D> rect_2d(double x0, double y0, double x1, double y1, const Rgb& colour, double opacity) {
+  auto pts = Ptr<vtkPoints>::New();
+  pts->InsertNextPoint(x0, y0, 0);
+  pts->InsertNextPoint(x1, y0, 0);
+  pts->InsertNextPoint(x1, y1, 0);
+  pts->InsertNextPoint(x0, y1, 0);
+  auto a = actor_2d(pts, {{0, 1, 2, 3}}, true, colour);
+  a->GetProperty()->SetOpacity(opacity);
+  return a;
+}
+
+Ptr<vtkActor2D> scale_bar_actor(vtkPoints* points, const Rgb& colour) {
+  auto a = actor_2d(points, {{0, 1}, {0, 2}, {1, 3}}, false, colour);
+  a->GetProperty()->SetLineWidth(3);
+  return a;
+}
+
 void add_scale_bar(vtkRenderer* r, double mm_per_px, int vw, int vh, const Rgb& colour) {
   if (!(mm_per_px > 0)) return;
   const double target_mm = 0.2 * vw * mm_per_px;
@@ -375,21 +413,7 @@ void add_scale_bar(vtkRenderer* r, double mm_per_px, int vw, int vh, const Rgb& 
   pts->InsertNextPoint(x0 + len_px, y0, 0);
   pts->InsertNextPoint(x0, y0 + tick, 0);
   pts->InsertNextPoint(x0 + len_px, y0 + tick, 0);
-  auto lines = Ptr<vtkCellArray>::New();
-  const vtkIdType a[2] = {0, 1}, b[2] = {0, 2}, c[2] = {1, 3};
-  lines->InsertNextCell(2, a);
-  lines->InsertNextCell(2, b);
-  lines->InsertNextCell(2, c);
-  auto pd = Ptr<vtkPolyData>::New();
-  pd->SetPoints(pts);
-  pd->SetLines(lines);
-  auto mapper = Ptr<vtkPolyDataMapper2D>::New();
-  mapper->SetInputData(pd);
-  auto actor = Ptr<vtkActor2D>::New();
-  actor->SetMapper(mapper);
-  actor->GetProperty()->SetColor(colour.r, colour.g, colour.b);
-  actor->GetProperty()->SetLineWidth(3);
-  r->AddViewProp(actor);
+  r->AddViewProp(scale_bar_actor(pts, colour));
   char label[32];
   std::snprintf(label, sizeof label, "%g mm", step);
   r->AddViewProp(text(label, std::max(12, vh / 40), colour, x0 + len_px / 2, y0 + tick + 4, 1, 0));

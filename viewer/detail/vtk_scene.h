@@ -8,6 +8,7 @@
 
 #include <vtkActor.h>
 #include <vtkActor2D.h>
+#include <vtkPoints.h>
 #include <vtkPolyData.h>
 #include <vtkProp.h>
 #include <vtkRenderWindow.h>
@@ -69,6 +70,14 @@ Eigen::Vector3d anterior_view(double azimuth_deg, double elevation_deg);
 /// vertical 0 bottom, 1 centre, 2 top.
 Ptr<vtkTextActor> text(const std::string& s, int font_px, const Rgb& colour, double x_px, double y_px,
                        int justify = 0, int vjustify = 0, bool bold = false);
+
+/// A filled rectangle in viewport pixels (legend swatches and backdrops).
+Ptr<vtkActor2D> rect_2d(double x0_px, double y0_px, double x1_px, double y1_px, const Rgb& colour,
+                        double opacity = 1.0);
+
+/// The scale-bar shape through four points in viewport pixels: the bar 0–1 and end ticks 0–2,
+/// 1–3, three pixels wide. Moving the points moves the bar (the preview does so every frame).
+Ptr<vtkActor2D> scale_bar_actor(vtkPoints* points, const Rgb& colour);
 
 /// A scale bar at the viewport's lower left: a round length (1, 2, 5 × 10ⁿ mm) about a fifth
 /// of the viewport's width, with end ticks and "<n> mm".
