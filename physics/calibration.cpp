@@ -1,4 +1,5 @@
 #include "physics/calibration.h"
+#include "core/file_io.h"
 #include "core/format.h"
 
 #include <Eigen/Dense>
@@ -9,7 +10,6 @@
 #include <charconv>
 #include <chrono>
 #include <cmath>
-#include <fstream>
 #include <limits>
 #include <map>
 #include <numeric>
@@ -193,13 +193,11 @@ CalibrationData parse_calibration_csv(const std::string& text, const std::filesy
 
 CalibrationData read_calibration_csv(const std::filesystem::path& path, bool displacement,
                                      std::size_t min_points) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in)
+  const auto text = read_file(path);
+  if (!text)
     throw InputError(ExitCode::input_not_found, "cannot read the calibration data", path,
                      "check the --data path");
-  std::ostringstream s;
-  s << in.rdbuf();
-  return parse_calibration_csv(s.str(), path, displacement, min_points);
+  return parse_calibration_csv(*text, path, displacement, min_points);
 }
 
 // ---- statistics ----------------------------------------------------------------------------------

@@ -3,6 +3,8 @@
 
 #include "clips_toml.h"  // generated from data/clips.toml
 #include "core/errors.h"
+#include "core/file_io.h"
+#include "core/toml_parse.h"
 #include "physics/models.h"
 #include "physics/presets.h"
 
@@ -10,7 +12,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <fstream>
 #include <limits>
 #include <numbers>
 #include <set>
@@ -122,14 +123,7 @@ void add_block(std::vector<Eigen::Triplet<double>>& t, int r, int c, const Eigen
 const char* builtin_clip_preset_text() { return kClipsToml; }
 
 ClipPreset parse_clip_preset(const std::string& text, const std::filesystem::path& source) {
-  toml::table root;
-  try {
-    root = toml::parse(text, source.string());
-  } catch (const toml::parse_error& e) {
-    std::ostringstream s;
-    s << e.description() << " (line " << e.source().begin.line << ")";
-    throw CaseFileError("malformed clip preset: " + s.str(), source, "the file must be TOML like data/clips.toml");
-  }
+  const toml::table root = parse_toml(text, source, "the clip preset", "the file must be TOML like data/clips.toml");
   PresetReader r(root, source);
   r.keys("clip", {"name", "source", "thickness_mm", "width_mm", "youngs_modulus_MPa", "poisson_ratio",
                   "yield_strength_MPa", "density_g_per_cm3"});
@@ -208,13 +202,11 @@ ClipPreset parse_clip_preset(const std::string& text, const std::filesystem::pat
 }
 
 ClipPreset read_clip_preset(const std::filesystem::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in)
+  const auto text = read_file(path);
+  if (!text)
     throw InputError(ExitCode::input_not_found, "cannot read the clip preset", path,
                      "check the path given to --clip");
-  std::ostringstream s;
-  s << in.rdbuf();
-  return parse_clip_preset(s.str(), path);
+  return parse_clip_preset(*text, path);
 }
 
 ClipPreset builtin_clip_preset() { return parse_clip_preset(kClipsToml, "data/clips.toml (embedded)"); }

@@ -1,4 +1,5 @@
 #include "physics/degradation.h"
+#include "core/file_io.h"
 #include "core/format.h"
 
 #include "physics/calibration.h"
@@ -10,7 +11,6 @@
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
-#include <fstream>
 #include <limits>
 #include <sstream>
 
@@ -383,11 +383,9 @@ MassSeries parse_mass_csv(const std::string& text, const std::filesystem::path& 
 }
 
 MassSeries read_mass_csv(const std::filesystem::path& path, double max_increase) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(ExitCode::input_not_found, "cannot read the mass series", path, "check the path given to --fit");
-  std::ostringstream s;
-  s << in.rdbuf();
-  return parse_mass_csv(s.str(), path, max_increase);
+  const auto text = read_file(path);
+  if (!text) throw InputError(ExitCode::input_not_found, "cannot read the mass series", path, "check the path given to --fit");
+  return parse_mass_csv(*text, path, max_increase);
 }
 
 // ---- τ_D fit ------------------------------------------------------------------------------------

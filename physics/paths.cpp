@@ -1,6 +1,7 @@
 #include "physics/paths.h"
 
 #include "core/errors.h"
+#include "core/file_io.h"
 #include "physics/contact.h"
 
 #include <Eigen/Eigenvalues>
@@ -10,7 +11,6 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <fstream>
 #include <limits>
 #include <map>
 #include <numbers>
@@ -573,11 +573,9 @@ DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap
 // ---- files ---------------------------------------------------------------------------------------
 
 Polyline read_path_file(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw InputError(ExitCode::input_not_found, "cannot read the path file", path, "check the file name");
-  std::stringstream ss;
-  ss << in.rdbuf();
-  const std::string text = ss.str();
+  const auto file = read_file(path);
+  if (!file) throw InputError(ExitCode::input_not_found, "cannot read the path file", path, "check the file name");
+  const std::string& text = *file;
   Polyline out;
   out.name = path.stem().string();
   const auto bad = [&](const std::string& what, const std::string& hint = {}) {

@@ -1,11 +1,11 @@
 #include "physics/presets.h"
 
 #include "core/errors.h"
+#include "core/toml_parse.h"
 #include "materials_toml.h"  // generated from data/materials.toml
 
 #include <toml++/toml.h>
 
-#include <sstream>
 
 namespace organsmith::physics {
 
@@ -46,14 +46,7 @@ const DerivativeTable& MaterialLibrary::table(const std::string& id) const {
 }
 
 MaterialLibrary parse_material_library(const std::string& text, const std::filesystem::path& source) {
-  toml::table root;
-  try {
-    root = toml::parse(text, source.string());
-  } catch (const toml::parse_error& e) {
-    std::ostringstream s;
-    s << e.description() << " (line " << e.source().begin.line << ")";
-    throw CaseFileError("malformed materials file: " + s.str(), source);
-  }
+  const toml::table root = parse_toml(text, source, "the materials file", "the file must be TOML like data/materials.toml");
   MaterialLibrary lib;
   if (const toml::table* r = root["regions"].as_table())
     for (const auto& [k, v] : *r) lib.regions[std::string(k.str())] = v.value_or(std::string());

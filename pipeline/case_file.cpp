@@ -1,13 +1,14 @@
 #include "pipeline/case_file.h"
 
 #include "core/errors.h"
+#include "core/file_io.h"
+#include "core/toml_parse.h"
 #include "default_case_toml.h"  // generated from data/default_case.toml
 #include "segmentation/presets.h"
 
 #include <toml++/toml.h>
 
 #include <algorithm>
-#include <fstream>
 #include <set>
 #include <sstream>
 
@@ -103,14 +104,7 @@ const std::vector<std::string>& known_organs() {
 }
 
 CaseFile parse_case(const std::string& text, const fs::path& origin) {
-  toml::table root;
-  try {
-    root = toml::parse(text, origin.string());
-  } catch (const toml::parse_error& e) {
-    throw CaseFileError("not valid TOML at line " + std::to_string(e.source().begin.line) + ": " +
-                            std::string(e.description()),
-                        origin, "fix the syntax (see README.md, 'Case file')");
-  }
+  toml::table root = parse_toml(text, origin, "the case file", "fix the syntax (see README.md, 'Case file')");
   CaseFile c;
   c.source = origin;
   const fs::path base = origin.empty() ? fs::current_path() : fs::absolute(origin).parent_path();
@@ -201,13 +195,11 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
 }
 
 CaseFile load_case_file(const fs::path& path) {
-  std::ifstream in(path);
-  if (!in)
+  const auto text = read_file(path);
+  if (!text)
     throw CaseFileError("cannot open the case file", path,
                         "check the path; `organsmith run` without a case runs the embedded default");
-  std::stringstream text;
-  text << in.rdbuf();
-  return parse_case(text.str(), path);
+  return parse_case(*text, path);
 }
 
 const std::string& default_case_text() {

@@ -2,6 +2,7 @@
 // (found automatically) into labels.nii.gz, contours_<organ>.json and overlay PNGs.
 
 #include "core/errors.h"
+#include "core/file_io.h"
 #include "pipeline/commands.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
@@ -15,7 +16,6 @@
 
 #include <chrono>
 #include <cstdio>
-#include <fstream>
 #include <memory>
 #include <sstream>
 
@@ -56,13 +56,15 @@ int run_segment(const SegmentFlags& f) {
   if (f.out.empty()) throw UsageError("--out is required", "give the output directory, e.g. --out seg");
   if (f.organs.empty()) throw UsageError("--organ is required", "--organ gallbladder --seed X,Y,Z and/or --organ trachea");
   const auto t0 = std::chrono::steady_clock::now();
-  const auto presets = f.presets.empty() ? default_organ_presets() : [&] {
-    std::ifstream in(f.presets);
-    if (!in) throw InputError(ExitCode::input_not_found, "cannot read the organ presets file", f.presets);
-    std::stringstream ss;
-    ss << in.rdbuf();
-    return parse_organ_presets(ss.str(), default_organ_presets());
-  }();
+  SegmentOptions options;
+  if (!f.presets.empty()) {
+    auto text = read_file(f.presets);
+    if (!text) throw InputError(ExitCode::input_not_found, "cannot read the organ presets file", f.presets);
+    options.preset_overrides_toml = std::move(*text);
+  }
+  const auto presets = options.preset_overrides_toml.empty()
+                           ? default_organ_presets()
+                           : parse_organ_presets(options.preset_overrides_toml, default_organ_presets());
   // Seeds go, in order, to the organs that need one (--seed and --seed-ijk are not mixed, so
   // the pairing is unambiguous).
   if (!f.seeds.empty() && !f.seeds_ijk.empty())
@@ -97,13 +99,6 @@ int run_segment(const SegmentFlags& f) {
 
   TerminalProgress progress;
   const IngestResult in = ingest(f.input, IngestOptions{}, progress);
-  SegmentOptions options;
-  if (!f.presets.empty()) {
-    std::ifstream pin(f.presets);
-    std::stringstream ss;
-    ss << pin.rdbuf();
-    options.preset_overrides_toml = ss.str();
-  }
   const SegmentationResult r = segment_organs(in.volume, requests, options, progress);
   progress.finish();
 

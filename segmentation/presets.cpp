@@ -1,6 +1,7 @@
 #include "segmentation/presets.h"
 
 #include "core/errors.h"
+#include "core/toml_parse.h"
 #include "organs_toml.h"
 
 #include <toml++/toml.h>
@@ -50,12 +51,7 @@ void get_range(const toml::table& t, const std::string& organ, Seen& seen, const
 }  // namespace
 
 std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, std::map<std::string, OrganPreset> base) {
-  toml::table root;
-  try {
-    root = toml::parse(text);
-  } catch (const toml::parse_error& e) {
-    throw CaseFileError(std::string("organ presets are not valid TOML: ") + std::string(e.description()), {});
-  }
+  const toml::table root = parse_toml(text, {}, "the organ presets", "the text must be TOML like `organsmith segment --print-presets`");
   for (auto&& [k, node] : root) {
     const std::string organ(k.str());
     const toml::table* t = node.as_table();
