@@ -2,6 +2,7 @@
 
 #include "core/errors.h"
 #include "core/file_io.h"
+#include "core/memory.h"
 #include "core/sha256.h"
 #include "organsmith_version.h"  // generated at build time: version and git commit
 #include "pipeline/guide_stage.h"
@@ -34,22 +35,6 @@ std::string tool_version() { return ORGANSMITH_VERSION_STRING; }
 std::string tool_git_commit() { return ORGANSMITH_GIT_COMMIT; }
 
 namespace {
-
-/// Resets the kernel's resident-set high-water mark so that it measures one stage.
-/// Returns false where the kernel does not allow it (the figure is then the process peak).
-bool reset_peak_rss() {
-  std::ofstream f("/proc/self/clear_refs");
-  f << "5";
-  return bool(f);
-}
-
-double peak_rss_mib() {
-  std::ifstream f("/proc/self/status");
-  std::string line;
-  while (std::getline(f, line))
-    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
-  return 0.0;
-}
 
 nlohmann::json list_outputs(const fs::path& root, const fs::path& out_dir) {
   std::vector<fs::path> files;

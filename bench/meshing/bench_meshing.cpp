@@ -3,6 +3,7 @@
 // vtkFlyingEdges3D on the same masks (a raw iso-surface, none of the guarantees), timed in the
 // same run. Usage: bench_meshing [slice_mm] (default 2.5, the default case's phantom).
 
+#include "core/memory.h"
 #include "core/progress.h"
 #include "meshing/mesh.h"
 #include "pipeline/phantom.h"
@@ -18,7 +19,6 @@
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
-#include <fstream>
 #include <string>
 
 using namespace organsmith;
@@ -28,18 +28,6 @@ namespace {
 
 double since(Clock::time_point t0) { return std::chrono::duration<double>(Clock::now() - t0).count(); }
 
-bool reset_peak() {
-  std::ofstream f("/proc/self/clear_refs");
-  f << "5";
-  return bool(f);
-}
-
-double peak_mib() {
-  std::ifstream f("/proc/self/status");
-  for (std::string line; std::getline(f, line);)
-    if (line.rfind("VmHWM:", 0) == 0) return std::stod(line.substr(6)) / 1024.0;
-  return 0.0;
-}
 
 /// Flying edges on the 0/1 mask of `label` (grid frame; the floor does not need LPS).
 double flying_edges_seconds(const LabelMap& lm, std::uint8_t label, std::size_t& triangles) {
@@ -81,11 +69,11 @@ int main(int argc, char** argv) {
   MeshOptions surf;
   surf.tetrahedra = false;
   surf.enforce_quality = false;  // the figures are reported; this measures time
-  const bool can_reset = reset_peak();
+  const bool can_reset = organsmith::reset_peak_rss();
   auto t0 = Clock::now();
   const OrganMeshes a = mesh_organs(ph.truth, surf, np);
   const double surface_s = since(t0);
-  const double surface_peak = peak_mib();
+  const double surface_peak = organsmith::peak_rss_mib();
   std::size_t tris = 0;
   for (const auto& o : a.organs)
     for (const auto& m : o.surfaces) tris += m.mesh.triangles.size();
@@ -109,11 +97,11 @@ int main(int argc, char** argv) {
 
   MeshOptions full;
   full.enforce_quality = false;
-  reset_peak();
+  organsmith::reset_peak_rss();
   t0 = Clock::now();
   const OrganMeshes b = mesh_organs(ph.truth, full, np);
   const double full_s = since(t0);
-  const double full_peak = peak_mib();
+  const double full_peak = organsmith::peak_rss_mib();
   std::size_t tets = 0;
   double tets_s = 0;
   for (const auto& o : b.organs) {

@@ -425,10 +425,7 @@ TEST_F(PhantomMeshes, ExportsRoundTripThroughIndependentReaders) {
   }
   // FEBio 4.0: parsed for the version, one SolidDomain and material per region, counts.
   {
-    std::ifstream in(dir.path() / "gallbladder" / "gallbladder.feb");
-    std::stringstream ss;
-    ss << in.rdbuf();
-    const std::string feb = ss.str();
+    const std::string feb = organsmith::testing::read_file(dir.path() / "gallbladder" / "gallbladder.feb");
     EXPECT_NE(feb.find("<febio_spec version=\"4.0\">"), std::string::npos);
     auto count = [&](const std::string& needle) {
       std::size_t n = 0;
@@ -445,11 +442,9 @@ TEST_F(PhantomMeshes, ExportsRoundTripThroughIndependentReaders) {
   const std::string script = std::string(ORGANSMITH_SOURCE_DIR) + "/tests/meshing/check_exports.py";
   const int rc = std::system(("/usr/bin/python3 " + script + " " + dir.path().string() + " > " +
                               (dir.path() / "readers.log").string() + " 2>&1").c_str());
-  std::ifstream log(dir.path() / "readers.log");
-  std::stringstream ls;
-  ls << log.rdbuf();
-  if (WEXITSTATUS(rc) == 77) GTEST_SKIP() << "independent readers not installed: " << ls.str();
-  EXPECT_EQ(WEXITSTATUS(rc), 0) << ls.str();
+  const std::string log = organsmith::testing::read_file(dir.path() / "readers.log");
+  if (WEXITSTATUS(rc) == 77) GTEST_SKIP() << "independent readers not installed: " << log;
+  EXPECT_EQ(WEXITSTATUS(rc), 0) << log;
 }
 
 // Two calls in one process: the second sees a different heap, so any ordering that follows
@@ -479,12 +474,9 @@ TEST(MeshingDeterminism, SameInputGivesByteIdenticalExports) {
   for (const auto& e : fs::recursive_directory_iterator(a.path())) {
     if (!e.is_regular_file()) continue;
     const fs::path other = b.path() / fs::relative(e.path(), a.path());
-    std::ifstream fa(e.path(), std::ios::binary), fb(other, std::ios::binary);
-    std::stringstream sa, sb;
-    sa << fa.rdbuf();
-    sb << fb.rdbuf();
     if (e.path().filename() == "quality.json") continue;  // holds run times
-    EXPECT_TRUE(sa.str() == sb.str()) << e.path().filename() << " differs between two calls";
+    EXPECT_TRUE(organsmith::testing::read_file(e.path()) == organsmith::testing::read_file(other))
+        << e.path().filename() << " differs between two calls";
     ++compared;
   }
   EXPECT_GE(compared, 9u);

@@ -10,17 +10,11 @@
 #include <sstream>
 
 namespace fs = std::filesystem;
+using organsmith::testing::read_file;
 using organsmith::testing::run_cli;
 using organsmith::testing::ScratchDir;
 
 namespace {
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 
@@ -36,8 +30,8 @@ TEST(DegradeCli, WritesStagesMassAndSummaryByteIdentically) {
     if (!e.is_regular_file()) continue;
     ++files;
     const fs::path rel = fs::relative(e.path(), s.path() / "a");
-    const std::string bytes = slurp(e.path());
-    EXPECT_TRUE(bytes == slurp(s.path() / "b" / rel)) << rel << " differs between two runs";
+    const std::string bytes = read_file(e.path());
+    EXPECT_TRUE(bytes == read_file(s.path() / "b" / rel)) << rel << " differs between two runs";
     if (e.path().extension() == ".png") {
       ++pngs;
       EXPECT_EQ(bytes.rfind("\x89PNG", 0), 0u) << rel;
@@ -47,21 +41,21 @@ TEST(DegradeCli, WritesStagesMassAndSummaryByteIdentically) {
   EXPECT_EQ(files, 16u);
   EXPECT_EQ(pngs, 7u);
   EXPECT_TRUE(fs::exists(s.path() / "a" / "snapshots" / "plot_degradation_stage_5.png"));
-  const auto j = nlohmann::json::parse(slurp(s.path() / "a" / "summary.json"));
+  const auto j = nlohmann::json::parse(read_file(s.path() / "a" / "summary.json"));
   ASSERT_EQ(j["stages"].size(), 6u);
   EXPECT_EQ(j["stages"][1]["previous"], "stage_0_0.0w.vtp");
   EXPECT_DOUBLE_EQ(j["stages"][5]["t_days"].get<double>(), 17.5);
   for (const auto& st : j["stages"]) {
-    const std::string vtp = slurp(s.path() / "a" / st["file"].get<std::string>());
+    const std::string vtp = read_file(s.path() / "a" / st["file"].get<std::string>());
     EXPECT_NE(vtp.find("Name=\"d\""), std::string::npos);
     EXPECT_NE(vtp.find("Name=\"E_star\""), std::string::npos);
     EXPECT_NE(vtp.find("NumberOfLines=\"60\""), std::string::npos);
   }
-  const std::string mass = slurp(s.path() / "a" / "mass.csv");
+  const std::string mass = read_file(s.path() / "a" / "mass.csv");
   EXPECT_EQ(mass.rfind("t_days,mass_fraction,", 0), 0u);
   // The mass curve it wrote calibrates back to the τ_D it was made with.
   ASSERT_EQ(run_cli("degrade --fit " + q(s.path() / "a" / "mass.csv") + " --out " + q(s.path() / "fit") + " --elements 60", &log), 0) << log;
-  const auto fit = nlohmann::json::parse(slurp(s.path() / "fit" / "fit.json"));
+  const auto fit = nlohmann::json::parse(read_file(s.path() / "fit" / "fit.json"));
   EXPECT_NEAR(fit["tau_d"].get<double>() / 241.41, 1.0, 2e-3);
   EXPECT_GT(fit["r2"].get<double>(), 0.999);
 }

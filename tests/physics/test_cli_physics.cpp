@@ -15,18 +15,12 @@
 #include <sstream>
 
 namespace fs = std::filesystem;
+using organsmith::testing::read_file;
 using organsmith::testing::run_cli;
 using organsmith::testing::ScratchDir;
 using namespace organsmith::physics;
 
 namespace {
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  std::ostringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
 
 void write_wall_csv(const fs::path& path) {
   const auto m = make_model("fung-wall");
@@ -52,9 +46,9 @@ TEST(PhysicsCli, CalibrateWritesParamsAndFitDeterministically) {
                 (s.path() / "a").string() + "' --seed 5 --residuals relative", &log), 0) << log;
   ASSERT_EQ(run_cli("calibrate --model fung-wall --data '" + (s.path() / "wall.csv").string() + "' --out '" +
                 (s.path() / "b").string() + "' --seed 5 --residuals relative", &log), 0) << log;
-  EXPECT_EQ(slurp(s.path() / "a" / "fit.csv"), slurp(s.path() / "b" / "fit.csv"));
-  auto j = nlohmann::json::parse(slurp(s.path() / "a" / "params.json"));
-  auto k = nlohmann::json::parse(slurp(s.path() / "b" / "params.json"));
+  EXPECT_EQ(read_file(s.path() / "a" / "fit.csv"), read_file(s.path() / "b" / "fit.csv"));
+  auto j = nlohmann::json::parse(read_file(s.path() / "a" / "params.json"));
+  auto k = nlohmann::json::parse(read_file(s.path() / "b" / "params.json"));
   EXPECT_EQ(j["parameters"], k["parameters"]) << "same seed, same parameters";
   EXPECT_EQ(j["model"], "fung-wall");
   EXPECT_EQ(j["seed"], 5);
@@ -67,7 +61,7 @@ TEST(PhysicsCli, CalibrateWritesParamsAndFitDeterministically) {
   EXPECT_TRUE(j["parameters"][0].contains("lower") && j["parameters"][0].contains("upper"));
   // a1, a2, a4 are not identifiable from uniaxial strips: no standard error is claimed for them.
   EXPECT_TRUE(j["parameters"][1]["standard_error"].is_null());
-  const std::string fit = slurp(s.path() / "a" / "fit.csv");
+  const std::string fit = read_file(s.path() / "a" / "fit.csv");
   EXPECT_EQ(fit.substr(0, fit.find('\n')), "specimen,load,stretch,lateral_stretch,stress_pa,model_stress_pa,residual_pa");
   EXPECT_EQ(std::count(fit.begin(), fit.end(), '\n'), 61);
 }
@@ -103,12 +97,12 @@ TEST(PhysicsCli, UncertaintyMonteCarloAndImvfosm) {
   ScratchDir s("physics-cli");
   std::string log;
   ASSERT_EQ(run_cli("uncertainty --method mc --samples 2000 --out '" + (s.path() / "mc").string() + "'", &log), 0) << log;
-  const std::string cdf = slurp(s.path() / "mc" / "cdf.csv");
+  const std::string cdf = read_file(s.path() / "mc" / "cdf.csv");
   EXPECT_EQ(cdf.substr(0, cdf.find('\n')), "stretch,probability,stress_pa");
   EXPECT_EQ(std::count(cdf.begin(), cdf.end(), '\n'), 1 + 7 * 101);
-  const auto j = nlohmann::json::parse(slurp(s.path() / "mc" / "summary.json"));
+  const auto j = nlohmann::json::parse(read_file(s.path() / "mc" / "summary.json"));
   EXPECT_EQ(j["stretches"].size(), 7u);
   ASSERT_EQ(run_cli("uncertainty --method imvfosm --derivatives printed --out '" + (s.path() / "im").string() + "'", &log), 0) << log;
-  const auto k = nlohmann::json::parse(slurp(s.path() / "im" / "imvfosm.json"));
+  const auto k = nlohmann::json::parse(read_file(s.path() / "im" / "imvfosm.json"));
   EXPECT_EQ(k["sigma"].size(), 7u);
 }

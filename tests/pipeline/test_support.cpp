@@ -1,9 +1,9 @@
 #include "test_support.h"
 
+#include "core/file_io.h"
+
 #include <array>
 #include <cstdio>
-#include <fstream>
-#include <iterator>
 #include <random>
 #include <sys/wait.h>
 
@@ -54,13 +54,11 @@ std::size_t count_files(const fs::path& dir) {
   return n;
 }
 
+std::string read_file(const fs::path& path) { return organsmith::read_file(path).value_or(std::string()); }
+
 bool any_file_contains(const fs::path& dir, const std::string& needle) {
-  for (const auto& e : fs::recursive_directory_iterator(dir)) {
-    if (!e.is_regular_file()) continue;
-    std::ifstream in(e.path(), std::ios::binary);
-    const std::string data((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-    if (data.find(needle) != std::string::npos) return true;
-  }
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.is_regular_file() && read_file(e.path()).find(needle) != std::string::npos) return true;
   return false;
 }
 

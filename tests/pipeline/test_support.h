@@ -35,6 +35,9 @@ int run_cli(const std::string& args, std::string* output);
 /// Every file under `dir` (recursively), as paths relative to it.
 std::size_t count_files(const std::filesystem::path& dir);
 
+/// The whole file as bytes (empty when it cannot be opened).
+std::string read_file(const std::filesystem::path& path);
+
 /// True when `needle` occurs in any file under `dir`.
 bool any_file_contains(const std::filesystem::path& dir, const std::string& needle);
 
