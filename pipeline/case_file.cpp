@@ -4,6 +4,7 @@
 #include "core/file_io.h"
 #include "core/toml_parse.h"
 #include "default_case_toml.h"  // generated from data/default_case.toml
+#include "pipeline/stage_options_toml.h"
 #include "segmentation/presets.h"
 
 #include <toml++/toml.h>
@@ -176,20 +177,24 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
   out.get("dir", dir);
   c.out_dir = origin.empty() ? fs::path(dir) : base / dir;
 
-  if (const toml::table* stages = root["stages"].as_table()) {
-    std::ostringstream js;
-    js << toml::json_formatter{*stages};
-    c.other_stages = nlohmann::json::parse(js.str());
-    if (const toml::table* presets = root["stages"]["segment"]["presets"].as_table()) {
-      std::ostringstream ts;
-      ts << toml::toml_formatter{*presets};
-      c.segment_presets_toml = ts.str();
-      try {
-        parse_organ_presets(c.segment_presets_toml, default_organ_presets());
-      } catch (const Error& e) {
-        throw CaseFileError(e.message() + " (in [stages.segment.presets])", origin, e.hint());
-      }
+  const toml::table* stages = root["stages"].as_table();
+  if (const toml::node* n = root.get("stages"); n && !stages)
+    throw CaseFileError("'stages' must be a table" + where(*n), origin, "write [stages.<stage>] tables");
+  c.stages = parse_stage_options(stages, origin);
+  if (const toml::table* presets = root["stages"]["segment"]["presets"].as_table()) {
+    std::ostringstream ts, js;
+    ts << toml::toml_formatter{*presets};
+    js << toml::json_formatter{*presets};
+    c.segment_presets_toml = ts.str();
+    c.segment_presets = nlohmann::json::parse(js.str());
+    try {
+      parse_organ_presets(c.segment_presets_toml, default_organ_presets());
+    } catch (const Error& e) {
+      throw CaseFileError(e.message() + " (in [stages.segment.presets])", origin, e.hint());
     }
+  } else if (const toml::node* p = root["stages"]["segment"]["presets"].node()) {
+    throw CaseFileError("[stages.segment] presets must be a table" + where(*p), origin,
+                        "write [stages.segment.presets.<organ>] tables");
   }
   return c;
 }
@@ -235,8 +240,16 @@ nlohmann::json to_json(const CaseFile& c) {
     j["organs"].push_back(oj);
   }
   j["output"] = {{"dir", c.out_dir.string()}};
-  j["stages"] = c.other_stages;
+  j["stages"] = nlohmann::json::object();
+  for (const auto& stage : configurable_stages()) j["stages"][stage] = stage_json(c, stage);
   return j;
 }
+
+nlohmann::json stage_json(const CaseFile& c, const std::string& stage) {
+  if (stage == "segment") return {{"presets", c.segment_presets}};
+  return stage_options_json(c.stages, stage);
+}
+
+std::string default_case_with_options_text() { return default_case_text() + "\n" + describe_stage_options(); }
 
 }  // namespace organsmith

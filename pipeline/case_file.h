@@ -4,6 +4,7 @@
 
 #include "pipeline/ingest.h"
 #include "pipeline/phantom.h"
+#include "pipeline/stage_options.h"
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
@@ -32,12 +33,22 @@ struct CaseFile {
   IngestOptions ingest;
   std::vector<OrganSpec> organs;
   std::filesystem::path out_dir = "out";
-  /// Option tables of stages this build does not provide yet, kept verbatim for the manifest.
-  nlohmann::json other_stages = nlohmann::json::object();
+  /// [stages.<stage>]: every stage's typed options (defaults where the case says nothing).
+  StageOptions stages;
   /// [stages.segment.presets] re-serialised as TOML (organ tables overriding data/organs.toml;
   /// validated on load); empty when the case has none.
   std::string segment_presets_toml;
+  /// The same presets as JSON, for the manifest and the segment stage's fingerprint.
+  nlohmann::json segment_presets = nlohmann::json::object();
 };
+
+/// One stage's resolved options as JSON ("segment": its presets), for the manifest and the
+/// stage's fingerprint.
+nlohmann::json stage_json(const CaseFile& c, const std::string& stage);
+
+/// The embedded default case followed by every stage option with its default and unit (what
+/// `organsmith run --print-default-case` prints; it parses back to the default case).
+std::string default_case_with_options_text();
 
 /// Organ names organsmith knows.
 const std::vector<std::string>& known_organs();

@@ -8,6 +8,7 @@
 #include "physics/clip.h"
 #include "physics/degradation.h"
 #include "pipeline/commands.h"
+#include "pipeline/output_dir.h"
 #include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
 #include "viewer/display.h"
@@ -250,6 +251,7 @@ int run_simulate(const DegradeFlags& f) {
   if (!(f.load_n >= 0)) throw UsageError("--load-n must be ≥ 0 N (got " + num(f.load_n) + ")");
   if (!(f.weeks > 0) || f.weeks > 520) throw UsageError("--weeks must lie in (0, 520] (got " + num(f.weeks) + ")");
   if (!(f.dt_days > 0) || f.dt_days > 7) throw UsageError("--dt-days must lie in (0, 7] (got " + num(f.dt_days) + ")");
+  OutputDir dir(f.out, OutputDirOptions{.inputs = {f.clip}, .command = "degrade"});
   const ClipModel model(load_preset(f), f.elements);
   DegradationOptions o;
   o.tau_d = f.tau_d;
@@ -329,8 +331,8 @@ int run_simulate(const DegradeFlags& f) {
         << ',' << (s.load_carried ? 1 : 0) << ',' << num(s.stored_mJ) << ',' << num(s.potential_mJ) << ','
         << s.iterations << ',' << num(s.residual_N) << '\n';
 
-  const fs::path out = fs::absolute(f.out);
-  write_directory_atomically(out, [&](const fs::path& dir) {
+  const fs::path out = dir.path();
+  dir.commit("degrade", [&](const fs::path& dir) {
     write_text_atomic(dir / "original.vtp", stage_vtp(model, nullptr, "original (stress-free) shape"));
     write_text_atomic(dir / "stage_0_0.0w.vtp", stage_vtp(model, &r.initial, "deployed, t = 0"));
     for (std::size_t k = 0; k < r.stages.size(); ++k)
@@ -356,6 +358,7 @@ int run_simulate(const DegradeFlags& f) {
 int run_fit(const DegradeFlags& f) {
   if (!(f.load_n >= 0)) throw UsageError("--load-n must be ≥ 0 N (got " + num(f.load_n) + ")");
   if (!(f.dt_days > 0) || f.dt_days > 7) throw UsageError("--dt-days must lie in (0, 7] (got " + num(f.dt_days) + ")");
+  OutputDir out_dir(f.out, OutputDirOptions{.inputs = {f.fit, f.clip}, .command = "degrade"});
   const MassSeries data = read_mass_csv(f.fit, f.max_increase);
   const ClipModel model(load_preset(f), f.elements);
   DegradationOptions o;
@@ -391,8 +394,8 @@ int run_fit(const DegradeFlags& f) {
         << num(fit.predicted[i] - data.mass_fraction[i]) << '\n';
   curve_csv << "t_days,mass_fraction\n";
   for (const auto& s : curve.steps) curve_csv << num(s.t_days) << ',' << num(s.mass_fraction) << '\n';
-  const fs::path out = fs::absolute(f.out);
-  write_directory_atomically(out, [&](const fs::path& dir) {
+  const fs::path out = out_dir.path();
+  out_dir.commit("degrade-fit", [&](const fs::path& dir) {
     write_text_atomic(dir / "fit.json", j.dump(2) + "\n");
     write_text_atomic(dir / "fit.csv", csv.str());
     write_text_atomic(dir / "model_mass.csv", curve_csv.str());
@@ -436,7 +439,7 @@ std::vector<Command> degradation_commands(CLI::App& app) {
       "weeks; cell data d and E* per element), DIR/mass.csv and DIR/summary.json.\n"
       "With --fit MASS.csv (columns t_days, mass_fraction) calibrates τ_D instead: DIR/fit.json, fit.csv,\n"
       "model_mass.csv.");
-  cmd->add_option("--out", f->out, "output directory (replaced as a whole; required unless --print-clip)");
+  cmd->add_option("--out", f->out, "output directory: new, empty, or one organsmith wrote before (other files are never touched; required unless --print-clip)");
   cmd->add_option("--clip", f->clip, "clip preset TOML (default: the embedded data/clips.toml; see --print-clip)");
   cmd->add_option("--load-n", f->load_n, "wound tension held by the clip, N (default 5: the thesis' loaded group)");
   cmd->add_option("--tau-d", f->tau_d, "τ_D of 6.16 in week·(kJ/m³)^½ (default 241.41, Table 6.1 group 1)");

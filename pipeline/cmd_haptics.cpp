@@ -11,6 +11,7 @@
 #include "physics/paths.h"
 #include "physics/presets.h"
 #include "pipeline/commands.h"
+#include "pipeline/output_dir.h"
 #include "pipeline/output_scene.h"
 #include "pipeline/guide_stage.h"
 #include "pipeline/image_io.h"
@@ -76,28 +77,24 @@ int run_guide(const GuideFlags& f) {
                        "names: trachea_centerline, trachea_incision, gallbladder_dissection; or a CSV/JSON file");
     }
   }
-  // Stage every file, then move them into OUT_DIR/paths: a failure leaves nothing behind.
-  const fs::path dest = out / "paths";
-  const fs::path staging = make_staging_dir(out / ".paths");
+  // Every file is staged, then moved into OUT_DIR/paths: a failure leaves nothing behind. Each
+  // named path is its own stage, so that adding one keeps the others.
+  OutputDir dir(out, OutputDirOptions{.in_place = true, .command = "guide"});
+  const fs::path dest = dir.path() / "paths";
   std::vector<std::string> written;
-  try {
+  dir.commit(f.path.empty() ? "guide" : "guide-" + fs::path(f.path).stem().string(), [&](const fs::path& staging) {
+    const fs::path paths = staging / "paths";
+    fs::create_directories(paths);
     if (user) {
       user->name = fs::path(f.path).stem().string();
-      write_text_atomic(staging / (user->name + ".json"),
+      write_text_atomic(paths / (user->name + ".json"),
                         path_json(*user, {{"recorded", 1.0}, {"length_mm", user->length_mm()}}));
-      write_text_atomic(staging / (user->name + ".vtp"), path_vtp(*user));
+      write_text_atomic(paths / (user->name + ".vtp"), path_vtp(*user));
       written = {user->name + ".json", user->name + ".vtp"};
     } else {
-      written = write_guidance_paths(out, staging, options);
+      written = write_guidance_paths(out, paths, options);
     }
-    fs::create_directories(dest);
-    for (const auto& w : written) fs::rename(staging / w, dest / w);
-    fs::remove_all(staging);
-  } catch (...) {
-    std::error_code ec;
-    fs::remove_all(staging, ec);
-    throw;
-  }
+  });
   for (const auto& w : written) std::cout << "wrote " << (dest / w).string() << "\n";
   return 0;
 }

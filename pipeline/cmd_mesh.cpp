@@ -6,6 +6,7 @@
 #include "meshing/mesh.h"
 #include "physics/presets.h"
 #include "pipeline/commands.h"
+#include "pipeline/output_dir.h"
 #include "pipeline/image_io.h"
 #include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
@@ -80,6 +81,7 @@ std::map<std::string, Material> region_materials() {
 int run_mesh(const MeshFlags& f) {
   const auto t0 = std::chrono::steady_clock::now();
   if (!fs::exists(f.input)) throw InputError(ExitCode::input_not_found, "the label map does not exist", f.input);
+  OutputDir out(f.out, OutputDirOptions{.inputs = {f.input}, .command = "mesh"});
   const LabelMap labels = read_label_map(f.input);
   MeshOptions options;
   options.edge_mm = f.edge_mm;
@@ -102,10 +104,9 @@ int run_mesh(const MeshFlags& f) {
   progress.finish();
   for (const auto& w : meshes.warnings) spdlog::warn("{}", w);
 
-  const fs::path final_dir = fs::absolute(f.out);
+  const fs::path final_dir = out.path();
   std::vector<std::string> warnings;
-  write_directory_atomically(final_dir,
-                             [&](const fs::path& staging) { export_meshes(meshes, staging, eo, &warnings); });
+  out.commit("mesh", [&](const fs::path& staging) { export_meshes(meshes, staging, eo, &warnings); });
   for (const auto& organ : meshes.organs) {
     for (const auto& w : organ.warnings) spdlog::warn("{}", w);
     for (const auto& s : organ.surfaces) {
@@ -134,7 +135,7 @@ std::vector<Command> meshing_commands(CLI::App& app) {
   auto* sub = app.add_subcommand(
       "mesh", "label map → organ surfaces, wall bodies and tetrahedral meshes (STL OBJ PLY VTP VTU MSH INP FEB)");
   sub->add_option("LABELS", flags->input, "label map (.nii/.nii.gz/.nrrd/.mha)")->required();
-  sub->add_option("--out", flags->out, "output directory (replaced atomically)")->required();
+  sub->add_option("--out", flags->out, "output directory: new, empty, or one organsmith wrote before (its earlier outputs are replaced; other files are never touched)")->required();
   sub->add_option("--edge-mm", flags->edge_mm, "target surface edge length in mm (default 1.5)")
       ->check(CLI::PositiveNumber);
   sub->add_option("--formats", flags->formats, "comma-separated: stl,obj,ply,vtp,vtu,msh,msh22,inp,feb (default: all)");

@@ -8,6 +8,7 @@
 #include "physics/presets.h"
 #include "physics/uncertainty.h"
 #include "pipeline/commands.h"
+#include "pipeline/output_dir.h"
 #include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
 
@@ -38,11 +39,12 @@ std::string load_name(LoadCase l) {
   return "?";
 }
 
-void make_out_dir(const fs::path& dir) {
-  std::error_code ec;
-  fs::create_directories(dir, ec);
-  if (ec || !fs::is_directory(dir))
-    throw OutputError("cannot create the output directory: " + ec.message(), dir);
+/// Writes `files` (name, text) as one stage of the command's output directory: all or none.
+void commit_files(OutputDir& dir, const std::string& stage,
+                  const std::vector<std::pair<std::string, std::string>>& files) {
+  dir.commit(stage, [&](const fs::path& staging) {
+    for (const auto& [name, text] : files) write_text_atomic(staging / name, text);
+  });
 }
 
 /// Options shared by the commands that build a model.
@@ -185,7 +187,9 @@ int run_materials(bool as_json, const std::string& model_filter) {
 
 // ---- calibrate ---------------------------------------------------------------------------------
 
-int run_calibrate(const ModelFlags& mf, const FitFlags& ff, const fs::path& data_path, const fs::path& out) {
+int run_calibrate(const ModelFlags& mf, const FitFlags& ff, const fs::path& data_path, const fs::path& out_arg) {
+  OutputDir dir(out_arg, OutputDirOptions{.inputs = {data_path}, .command = "calibrate"});
+  const fs::path out = dir.path();
   const auto model = make_model(mf.model, mf.options);
   const bool cutting = mf.model == "kelvin-cutting";
   FitOptions o = ff.options();
@@ -195,7 +199,6 @@ int run_calibrate(const ModelFlags& mf, const FitFlags& ff, const fs::path& data
   TerminalProgress progress;
   const FitResult r = calibrate(*model, data, o, &progress);
   progress.finish();
-  make_out_dir(out);
   nlohmann::json j = fit_json(*model, r);
   j["model"] = model->name();
   j["data"] = fs::absolute(data_path).string();
@@ -211,8 +214,7 @@ int run_calibrate(const ModelFlags& mf, const FitFlags& ff, const fs::path& data
   if (cutting) j["blade_speed_m_per_s"] = mf.options.blade_speed_m_per_s;
   if (mf.model == "ogden") j["ogden_terms"] = mf.options.ogden_terms;
   j["tool_version"] = tool_version();
-  write_text_atomic(out / "fit.csv", fit_csv(data, r, cutting));
-  write_text_atomic(out / "params.json", j.dump(2) + "\n");
+  commit_files(dir, "calibrate", {{"fit.csv", fit_csv(data, r, cutting)}, {"params.json", j.dump(2) + "\n"}});
   std::cout << model->name() << " fitted to " << data.points.size() << " points in " << num(r.seconds) << " s\n";
   for (std::size_t k = 0; k < model->parameter_count(); ++k)
     std::cout << "  " << model->parameters()[k].name << " = " << num(r.parameters[k]) << " "
@@ -243,7 +245,9 @@ LoadCase direction_load(const std::string& d) {
 }
 
 int run_uncertainty(const UncertaintyFlags& u, const ModelFlags& mf, const FitFlags& ff) {
-  const fs::path out = u.out;
+  OutputDir dir(u.out, OutputDirOptions{.inputs = {u.data}, .command = "uncertainty"});
+  const fs::path out = dir.path();
+  const std::string stage = "uncertainty-" + u.method;  // the methods' outputs live side by side
   const MaterialLibrary lib = builtin_material_library();
   if (u.method == "dc") {
     if (mf.model.empty() || u.data.empty())
@@ -271,9 +275,7 @@ int run_uncertainty(const UncertaintyFlags& u, const ModelFlags& mf, const FitFl
     for (std::size_t k = 0; k < model->parameter_count(); ++k)
       j["summary"].push_back({{"name", model->parameters()[k].name}, {"unit", model->parameters()[k].unit},
                               {"mean", dc.mean[k]}, {"sd", dc.sd[k]}});
-    make_out_dir(out);
-    write_text_atomic(out / "dc.csv", csv.str());
-    write_text_atomic(out / "dc.json", j.dump(2) + "\n");
+    commit_files(dir, stage, {{"dc.csv", csv.str()}, {"dc.json", j.dump(2) + "\n"}});
     std::cout << "DC over " << dc.fits.size() << " specimens:\n";
     for (std::size_t k = 0; k < model->parameter_count(); ++k)
       std::cout << "  " << model->parameters()[k].name << " mean " << num(dc.mean[k]) << " sd " << num(dc.sd[k]) << " "
@@ -313,9 +315,7 @@ int run_uncertainty(const UncertaintyFlags& u, const ModelFlags& mf, const FitFl
     csv << "stretch,sigma_T_pa,predicted_sigma_T_pa\n";
     for (std::size_t k = 0; k < t.stretch.size(); ++k)
       csv << num(t.stretch[k]) << ',' << num(t.sigma_T_Pa[k]) << ',' << num(r.predicted_sd_Pa[k]) << '\n';
-    make_out_dir(out);
-    write_text_atomic(out / "imvfosm.csv", csv.str());
-    write_text_atomic(out / "imvfosm.json", j.dump(2) + "\n");
+    commit_files(dir, stage, {{"imvfosm.csv", csv.str()}, {"imvfosm.json", j.dump(2) + "\n"}});
     std::cout << "IMVFOSM (" << u.derivatives << " derivatives, " << t.id << "): RMS relative σ_T error "
               << num(100 * r.rms_relative_error) << " %\n";
     for (std::size_t k = 0; k < r.sigma.size(); ++k)
@@ -361,9 +361,7 @@ int run_uncertainty(const UncertaintyFlags& u, const ModelFlags& mf, const FitFl
                               {"mc_mean_pa", mc.moments.mean_Pa[k]}, {"mc_sd_pa", mc.moments.sd_Pa[k]},
                               {"mc_median_pa", mc.median_Pa[k]}, {"mc_robust_sd_pa", mc.robust_sd_Pa[k]}});
   }
-  make_out_dir(out);
-  write_text_atomic(out / "cdf.csv", csv.str());
-  write_text_atomic(out / "summary.json", j.dump(2) + "\n");
+  commit_files(dir, stage, {{"cdf.csv", csv.str()}, {"summary.json", j.dump(2) + "\n"}});
   std::cout << "Monte Carlo, " << u.samples << " draws of " << preset.id << " (" << u.spread << "); "
             << mc.invalid_draws << " draws outside the model's domain were left out\n"
             << "  stretch  linearised mean ± sd   MC mean ± sd   MC median ± robust sd  (Pa)\n";
@@ -404,7 +402,7 @@ std::vector<Command> physics_commands(CLI::App& app) {
   cal_model->add_to(calibrate_cmd, true);
   calibrate_cmd->add_option("--data", *cal_data, "measurements (CSV, header row; stress in Pa, displacement in m, force in N)")
       ->required()->check(CLI::ExistingFile);
-  calibrate_cmd->add_option("--out", *cal_out, "output directory (created if missing)")->required();
+  calibrate_cmd->add_option("--out", *cal_out, "output directory: new, empty, or one organsmith wrote before (other files are never touched)")->required();
   cal_fit->add_to(calibrate_cmd);
   commands.push_back({calibrate_cmd, [=] { return run_calibrate(*cal_model, *cal_fit, *cal_data, *cal_out); }});
 
@@ -433,7 +431,7 @@ std::vector<Command> physics_commands(CLI::App& app) {
   uncertainty->add_option("--samples", un->samples, "mc: number of draws (default 10000)")->check(CLI::Range(2, 100000000));
   uncertainty->add_option("--mc-seed", un->seed, "mc: random seed (default 1)");
   uncertainty->add_option("--data", un->data, "dc: measurements with a 'specimen' column")->check(CLI::ExistingFile);
-  uncertainty->add_option("--out", un->out, "output directory (created if missing)")->required();
+  uncertainty->add_option("--out", un->out, "output directory: new, empty, or one organsmith wrote before (other files are never touched)")->required();
   un_model->add_to(uncertainty, false);
   un_fit->add_to(uncertainty);
   commands.push_back({uncertainty, [=] { return run_uncertainty(*un, *un_model, *un_fit); }});

@@ -6,6 +6,7 @@
 #include "pipeline/commands.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
+#include "pipeline/output_dir.h"
 #include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
 #include "segmentation/presets.h"
@@ -97,13 +98,15 @@ int run_segment(const SegmentFlags& f) {
     throw UsageError(std::to_string(n_seeds) + " seeds given for " + std::to_string(next_seed) + " seeded organs",
                      "give one --seed per --organ gallbladder; the trachea needs none");
 
+  // Checked before the long work: never into or above the input, never over a user's files.
+  OutputDir out(f.out, OutputDirOptions{.inputs = {f.input}, .command = "segment"});
   TerminalProgress progress;
   const IngestResult in = ingest(f.input, IngestOptions{}, progress);
   const SegmentationResult r = segment_organs(in.volume, requests, options, progress);
   progress.finish();
 
-  const fs::path final_dir = fs::absolute(f.out);
-  write_directory_atomically(final_dir, [&](const fs::path& staging) {
+  const fs::path final_dir = out.path();
+  out.commit("segment", [&](const fs::path& staging) {
     write_label_map(r.labels, staging / "labels.nii.gz");
     nlohmann::json summary = {{"input_format", in.report.format}, {"organs", nlohmann::json::array()}};
     for (const auto& o : r.organs) {
@@ -137,7 +140,7 @@ std::vector<Command> segmentation_commands(CLI::App& app) {
       "Writes DIR/labels.nii.gz (1 gallbladder, 2 trachea; the input's grid), DIR/contours_<organ>.json\n"
       "(LPS mm), DIR/overlay_<organ>.png for review, and DIR/segmentation.json.");
   sub->add_option("INPUT", flags->input, "DICOM directory or file, or .nii/.nii.gz/.nrrd/.mha (required)");
-  sub->add_option("--out", flags->out, "output directory, replaced atomically (required)");
+  sub->add_option("--out", flags->out, "output directory: new, empty, or one organsmith wrote before (its earlier outputs are replaced; other files are never touched) (required)");
   sub->add_option("--organ", flags->organs, "gallbladder or trachea; repeat for several organs (required)");
   sub->add_option("--seed", flags->seeds, "seed inside the organ, X,Y,Z in LPS mm; one per seeded --organ, in order")
       ->allow_extra_args(false);

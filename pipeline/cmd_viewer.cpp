@@ -7,6 +7,7 @@
 #include "physics/haptic_loop.h"
 #include "physics/models.h"
 #include "pipeline/commands.h"
+#include "pipeline/output_dir.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
 #include "pipeline/output_scene.h"
@@ -49,6 +50,11 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
     for (const auto& v : views) options.views.push_back(parse_view_kind(v));
   }
   const fs::path out = fs::absolute(out_arg);
+  std::error_code ec;
+  if (!fs::is_directory(out, ec))  // load_output_scene names what it misses inside the directory
+    throw InputError(ExitCode::input_not_found, "no such output directory", out,
+                     "run `organsmith run --out " + out_arg + "` first");
+  OutputDir dir(out, OutputDirOptions{.in_place = true, .command = "snapshot"});
   TerminalProgress progress;
   OutputScene os;
   load_output_scene(out, flags, os, progress);
@@ -59,8 +65,9 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
                      "run `organsmith run --out " + out_arg + "` first");
   const fs::path final_dir = out / "snapshots";
   std::vector<fs::path> written;
-  write_directory_atomically(final_dir, [&](const fs::path& staging) {
-    written = render_snapshots(os.scene, options, staging, progress);
+  dir.commit("snapshot", [&](const fs::path& staging) {
+    fs::create_directories(staging / "snapshots");
+    written = render_snapshots(os.scene, options, staging / "snapshots", progress);
   });
   progress.finish();
   std::cout << "organsmith wrote " << written.size() << " snapshots (" << options.width_px << "x" << options.height_px

@@ -4,6 +4,7 @@
 #include "pipeline/case_file.h"
 #include "pipeline/commands.h"
 #include "pipeline/ingest.h"
+#include "pipeline/output_dir.h"
 #include "pipeline/phantom.h"
 #include "pipeline/phantom_files.h"
 #include "pipeline/runner.h"
@@ -112,8 +113,9 @@ int cmd_info(const fs::path& input, const IngestFlags& flags, bool as_json) {
 int cmd_phantom(const fs::path& out, const PhantomOptions& options) {
   TerminalProgress progress(spdlog::get_level() >= spdlog::level::warn);
   const auto t0 = std::chrono::steady_clock::now();
-  const fs::path final_dir = fs::absolute(out);
-  write_directory_atomically(final_dir, [&](const fs::path& staging) {
+  OutputDir dir(out, OutputDirOptions{.command = "phantom"});
+  const fs::path final_dir = dir.path();
+  dir.commit("phantom", [&](const fs::path& staging) {
     const Phantom ph = synthesize_phantom(options, progress);
     write_phantom_files(ph, options, staging, progress);
   });
@@ -196,7 +198,9 @@ int main(int argc, char** argv) {
   PhantomOptions phantom_options;
   auto* phantom = app.add_subcommand("phantom", "Write the synthetic torso phantom: a CT series (DIR/dicom/),\n"
                                                 "its ground truth (DIR/ground_truth.nii.gz) and seeds (DIR/seeds.json).");
-  phantom->add_option("--out", phantom_out, "output directory (replaced atomically)")->required();
+  phantom->add_option("--out", phantom_out,
+                      "output directory: new, empty, or one organsmith wrote before (its earlier outputs are "
+                      "replaced; other files are never touched)")->required();
   phantom->add_option("--seed", phantom_options.seed, "random seed (default 1)");
   phantom->add_option("--size", phantom_options.size_vox, "in-plane matrix in voxels (default 512)")->check(CLI::Range(32, 2048));
   phantom->add_option("--slice-mm", phantom_options.slice_mm, "slice spacing in mm (default 2.5)")->check(CLI::Range(0.1, 20.0));
@@ -213,7 +217,8 @@ int main(int argc, char** argv) {
   run->add_option("--out", run_out, "output directory (overrides the case's [output] dir)");
   run->add_flag("--force", force, "redo every stage even when unchanged");
   run->add_option("--until", until, "stop after this stage (phantom, ingest, segment, …)");
-  run->add_flag("--print-default-case", print_default, "print the embedded default case and exit");
+  run->add_flag("--print-default-case", print_default,
+                "print the embedded default case with every stage option, its default and unit, and exit");
   run_flags.add_to(run);
 
   std::vector<Command> commands;
@@ -238,7 +243,7 @@ int main(int argc, char** argv) {
     if (*phantom) return cmd_phantom(phantom_out, phantom_options);
     if (*run) {
       if (print_default) {
-        std::cout << default_case_text();
+        std::cout << default_case_with_options_text();
         return 0;
       }
       return cmd_run(case_path, run_out, force, until, run_flags);

@@ -14,6 +14,7 @@
 #include "meshing/mesh.h"
 #include "physics/contact.h"
 #include "physics/presets.h"
+#include "pipeline/output_dir.h"
 #include "pipeline/output_scene.h"
 #include "viewer/snapshot.h"
 #include "segmentation/segment.h"
@@ -35,19 +36,6 @@ std::string tool_version() { return ORGANSMITH_VERSION_STRING; }
 std::string tool_git_commit() { return ORGANSMITH_GIT_COMMIT; }
 
 namespace {
-
-nlohmann::json list_outputs(const fs::path& root, const fs::path& out_dir) {
-  std::vector<fs::path> files;
-  for (const auto& e : fs::recursive_directory_iterator(root))
-    if (e.is_regular_file()) files.push_back(e.path());
-  std::sort(files.begin(), files.end());
-  nlohmann::json outs = nlohmann::json::array();
-  for (const auto& f : files)
-    outs.push_back({{"path", fs::relative(f, out_dir).generic_string()},
-                    {"bytes", fs::file_size(f)},
-                    {"sha256", sha256_file(f)}});
-  return outs;
-}
 
 /// True when every output a previous run recorded is still there, unchanged.
 bool outputs_intact(const nlohmann::json& outputs, const fs::path& out_dir) {
@@ -104,32 +92,22 @@ struct Stage {
 class Runner {
  public:
   Runner(const CaseFile& c, const RunOptions& options, Progress& progress)
-      : case_(c), options_(options), progress_(progress), out_(fs::absolute(c.out_dir)) {
-    std::ifstream in(out_ / "manifest.json");
-    if (in) {
-      try {
-        previous_ = nlohmann::json::parse(in);
-      } catch (const nlohmann::json::exception&) {
-        spdlog::warn("ignoring the unreadable previous manifest in {}", out_.string());
-      }
-    }
-  }
+      : case_(c),
+        options_(options),
+        progress_(progress),
+        out_dir_(c.out_dir, OutputDirOptions{.inputs = c.synthesize_phantom ? std::vector<fs::path>{}
+                                                                            : std::vector<fs::path>{c.input},
+                                             .command = "run"}),
+        out_(out_dir_.path()),
+        previous_(out_dir_.previous_manifest()) {}
 
   RunSummary run() {
-    const bool existed = fs::exists(out_);
-    try {
-      run_stages();
-    } catch (...) {
-      // A run that wrote nothing leaves no empty output directory behind either.
-      std::error_code ec;
-      if (!existed && fs::is_directory(out_, ec) && fs::is_empty(out_, ec)) fs::remove(out_, ec);
-      throw;
-    }
+    run_stages();
     RunSummary summary;
     summary.out_dir = out_;
     summary.stages = records_;
-    summary.manifest = manifest();
-    write_text_atomic(out_ / "manifest.json", summary.manifest.dump(2) + "\n");
+    out_dir_.write_manifest(manifest_header());
+    summary.manifest = out_dir_.manifest();
     return summary;
   }
 
@@ -152,10 +130,10 @@ class Runner {
              [&](const fs::path& staging) { write_ingest(staging); }});
 
     if (!case_.organs.empty()) {
-      const nlohmann::json seg_opts = case_.other_stages.value("segment", nlohmann::json::object());
+      const nlohmann::json seg_opts = stage_json(case_, "segment");
       execute({"segment", fingerprint("segment", seg_opts.dump() + outputs_digest("ingest")),
                [&](const fs::path& staging) { write_segmentation(staging); }});
-      const nlohmann::json mesh_opts = case_.other_stages.value("mesh", nlohmann::json::object());
+      const nlohmann::json mesh_opts = stage_json(case_, "mesh");
       execute({"mesh", fingerprint("mesh", mesh_opts.dump() + outputs_digest("segment")),
                [&](const fs::path& staging) { write_meshes(staging); }});
       execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
@@ -163,13 +141,14 @@ class Runner {
                  write_text_atomic(staging / "materials.json", materials_json().dump(2) + "\n");
                }});
       // guide: guidance paths (trachea centreline and incision, gallbladder dissection) in paths/.
-      execute({"guide", fingerprint("guide", outputs_digest("phantom") + outputs_digest("segment") + outputs_digest("mesh")),
+      execute({"guide", fingerprint("guide", stage_json(case_, "guide").dump() + outputs_digest("phantom") +
+                                                 outputs_digest("segment") + outputs_digest("mesh")),
                [&](const fs::path& staging) {
-                 for (const auto& f : write_guidance_paths(out_, staging / "paths", GuideStageOptions{}))
+                 for (const auto& f : write_guidance_paths(out_, staging / "paths", case_.stages.guide))
                    spdlog::info("guide: paths/{}", f);
                }});
     }
-    const nlohmann::json snap_opts = case_.other_stages.value("snapshot", nlohmann::json::object());
+    const nlohmann::json snap_opts = stage_json(case_, "snapshot");
     execute({"snapshot",
              fingerprint("snapshot", snap_opts.dump() + outputs_digest("ingest") + outputs_digest("segment") +
                                          outputs_digest("mesh") + outputs_digest("attach") +
@@ -181,14 +160,20 @@ class Runner {
   /// into meshes/<organ>/ with the calibrated materials in the solver files.
   void write_meshes(const fs::path& staging) {
     const LabelMap labels = read_label_map(out_ / "labels.nii.gz");
+    const MeshStageOptions& mo = case_.stages.mesh;
     MeshOptions options;
     options.organs.clear();
-    for (const auto& spec : default_organs())
+    for (auto spec : default_organs())
       for (const auto& o : case_.organs)
-        if (o.name == spec.name) options.organs.push_back(spec);
-    // The tetrahedral quality gate is not yet met everywhere (a few tets per organ): the run
-    // reports the failing figures and quality.json records them instead of stopping.
-    options.enforce_quality = false;
+        if (o.name == spec.name) {
+          if (spec.model == OrganModel::tube) spec.wall_mm = mo.trachea_wall_mm;
+          else if (spec.model == OrganModel::wall_body) spec.wall_mm = mo.gallbladder_wall_mm;
+          options.organs.push_back(spec);
+        }
+    options.edge_mm = mo.edge_mm;
+    options.tetrahedra = mo.tetrahedra;
+    // "report" (the default): a failing figure is a warning and quality.json records it.
+    options.enforce_quality = mo.quality_gate == "enforce";
     const OrganMeshes meshes = mesh_organs(labels, options, progress_);
     for (const auto& w : meshes.warnings) spdlog::warn("mesh: {}", w);
     for (const auto& organ : meshes.organs) {
@@ -199,6 +184,8 @@ class Runner {
         for (const auto& f : surf.quality.failures) spdlog::warn("mesh: {}: {}", surf.name, f);
     }
     ExportOptions ex;
+    ex.formats = mo.formats;
+    ex.ras = mo.ras;
     const physics::MaterialLibrary lib = physics::builtin_material_library();
     for (const auto& [region, preset_id] : lib.regions) ex.materials[region] = lib.find(preset_id).material;
     std::vector<std::string> warnings;
@@ -211,14 +198,19 @@ class Runner {
   void write_snapshots(const fs::path& staging) {
     // The scene loader reads the case (organs, input) from the manifest: record the stages so
     // far first (the final manifest replaces it when the run ends).
-    write_text_atomic(out_ / "manifest.json", manifest().dump(2) + "\n");
+    out_dir_.write_manifest(manifest_header());
     LoadFlags flags;
     flags.ct = input_.string();
     OutputScene os;
     load_output_scene(out_, flags, os, progress_);
     for (const auto& m : os.missing) spdlog::info("snapshot: not found: {}", m);
     fs::create_directories(staging / "snapshots");
-    const auto written = render_snapshots(os.scene, SnapshotOptions{}, staging / "snapshots", progress_);
+    SnapshotOptions so;
+    so.width_px = case_.stages.snapshot.width_px;
+    so.height_px = case_.stages.snapshot.height_px;
+    so.views.clear();
+    for (const auto& v : case_.stages.snapshot.views) so.views.push_back(parse_view_kind(v));
+    const auto written = render_snapshots(os.scene, so, staging / "snapshots", progress_);
     spdlog::info("snapshot: {} views", written.size());
   }
 
@@ -379,58 +371,47 @@ class Runner {
       rec.peak_rss_mib = prev->value("peak_rss_mib", 0.0);
       if (stage.name == "ingest" && previous_.contains("input")) input_json_ = previous_["input"];
       spdlog::info("stage {}: unchanged since the last run, skipped (--force to redo)", stage.name);
+      out_dir_.keep(record_json(rec));
       records_.push_back(rec);
       return;
     }
     spdlog::info("stage {}: running", stage.name);
     const bool per_stage_peak = reset_peak_rss();
     const auto t0 = std::chrono::steady_clock::now();
-    fs::create_directories(out_);
-    const fs::path staging = make_staging_dir(out_ / ("." + stage.name));
-    try {
-      stage.run(staging);
-      rec.outputs = list_outputs(staging, staging);
-      // Move each top-level entry into place.
-      for (const auto& e : fs::directory_iterator(staging)) {
-        const fs::path dest = out_ / e.path().filename();
-        if (e.is_directory()) commit_directory(e.path(), dest);
-        else fs::rename(e.path(), dest);
-      }
-      fs::remove_all(staging);
-    } catch (...) {
-      std::error_code ec;
-      fs::remove_all(staging, ec);
-      throw;
-    }
+    out_dir_.set_header(manifest_header());
+    rec.outputs = out_dir_.commit(stage.name, stage.run, record_json(rec));
     rec.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     rec.peak_rss_mib = peak_rss_mib();
     if (!per_stage_peak) spdlog::debug("peak memory is the process peak (cannot reset VmHWM)");
     spdlog::info("stage {}: done in {:.2f} s, peak {:.0f} MiB, {} file(s)", stage.name, rec.seconds,
                  rec.peak_rss_mib, rec.outputs.size());
+    out_dir_.keep(record_json(rec));
     records_.push_back(rec);
   }
 
-  nlohmann::json manifest() const {
+  static nlohmann::json record_json(const StageRecord& r) {
+    return {{"name", r.name},
+            {"fingerprint", r.fingerprint},
+            {"status", r.skipped ? "skipped (unchanged)" : "ran"},
+            {"seconds", r.seconds},
+            {"peak_rss_mib", r.peak_rss_mib},
+            {"outputs", r.outputs}};
+  }
+
+  /// Everything of the manifest but the stage records (OutputDir keeps those).
+  nlohmann::json manifest_header() const {
     nlohmann::json m;
-    m["tool"] = {{"name", "organsmith"}, {"version", tool_version()}, {"git_commit", tool_git_commit()}};
     m["case"] = to_json(case_);
     m["input"] = input_json_;
     m["coordinates"] = "LPS millimetres (DICOM patient coordinates)";
     if (!case_.organs.empty()) m["materials"] = materials_json()["regions"];
-    m["stages"] = nlohmann::json::array();
-    for (const auto& r : records_)
-      m["stages"].push_back({{"name", r.name},
-                             {"fingerprint", r.fingerprint},
-                             {"status", r.skipped ? "skipped (unchanged)" : "ran"},
-                             {"seconds", r.seconds},
-                             {"peak_rss_mib", r.peak_rss_mib},
-                             {"outputs", r.outputs}});
     return m;
   }
 
   const CaseFile& case_;
   RunOptions options_;
   Progress& progress_;
+  OutputDir out_dir_;
   fs::path out_;
   nlohmann::json previous_;
   std::vector<StageRecord> records_;
@@ -455,36 +436,6 @@ fs::path make_staging_dir(const fs::path& final_path) {
                               "check that the output directory is writable");
   }
   throw OutputError("cannot create a unique staging directory", final_path);
-}
-
-void commit_directory(const fs::path& staging_dir, const fs::path& final_dir) {
-  std::error_code ec;
-  fs::path old;
-  if (fs::exists(final_dir, ec)) {
-    old = make_staging_dir(final_dir);
-    fs::remove(old);
-    fs::rename(final_dir, old, ec);
-    if (ec) throw OutputError("cannot move the previous output aside: " + ec.message(), final_dir);
-  }
-  fs::rename(staging_dir, final_dir, ec);
-  if (ec) {
-    if (!old.empty()) fs::rename(old, final_dir);
-    throw OutputError("cannot move the new output into place: " + ec.message(), final_dir);
-  }
-  if (!old.empty()) fs::remove_all(old, ec);
-}
-
-void write_directory_atomically(const fs::path& final_dir, const std::function<void(const fs::path&)>& write) {
-  fs::create_directories(final_dir.parent_path());
-  const fs::path staging = make_staging_dir(final_dir);
-  try {
-    write(staging);
-    commit_directory(staging, final_dir);
-  } catch (...) {
-    std::error_code ec;
-    fs::remove_all(staging, ec);
-    throw;
-  }
 }
 
 void write_text_atomic(const fs::path& path, const std::string& text) { write_file_atomic(path, text); }

@@ -43,18 +43,8 @@ struct RunSummary {
 /// never left behind (each stage writes into a staging directory that is renamed into place).
 RunSummary run_case(const CaseFile& c, const RunOptions& options, Progress& progress);
 
-/// Replaces `final_dir` by `staging_dir` (renames; the old directory is removed only after the
-/// new one is in place).
-void commit_directory(const std::filesystem::path& staging_dir, const std::filesystem::path& final_dir);
-
 /// A fresh staging directory next to `final_path` (same file system, so renames are atomic).
 std::filesystem::path make_staging_dir(const std::filesystem::path& final_path);
-
-/// Creates `final_dir` as a whole: `write` fills a staging directory beside it, which then
-/// replaces `final_dir` (see commit_directory). On any exception the staging directory is
-/// removed and the exception passes on, so a failed write leaves nothing behind.
-void write_directory_atomically(const std::filesystem::path& final_dir,
-                                const std::function<void(const std::filesystem::path& staging)>& write);
 
 /// Writes `text` to `path` atomically (temporary file in the same directory, then rename).
 void write_text_atomic(const std::filesystem::path& path, const std::string& text);

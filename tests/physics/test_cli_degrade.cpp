@@ -37,8 +37,9 @@ TEST(DegradeCli, WritesStagesMassAndSummaryByteIdentically) {
       EXPECT_EQ(bytes.rfind("\x89PNG", 0), 0u) << rel;
     }
   }
-  // original, 6 stages, mass.csv, summary.json; pictures: 5 stages (Fig. 6.8), energy map, mass.
-  EXPECT_EQ(files, 16u);
+  // original, 6 stages, mass.csv, summary.json, manifest.json (what organsmith wrote there);
+  // pictures: 5 stages (Fig. 6.8), energy map, mass.
+  EXPECT_EQ(files, 17u);
   EXPECT_EQ(pngs, 7u);
   EXPECT_TRUE(fs::exists(s.path() / "a" / "snapshots" / "plot_degradation_stage_5.png"));
   const auto j = nlohmann::json::parse(read_file(s.path() / "a" / "summary.json"));

@@ -44,8 +44,16 @@ name = "trachea"
 seed_ijk = [256, 240, 12]
 [output]
 dir = "results"
-[stages.segment]
-iterations = 200
+[stages.mesh]
+edge_mm = 4.0
+gallbladder_wall_mm = 3
+formats = ["stl", "inp"]
+quality_gate = "enforce"
+[stages.guide]
+ring_count = 3
+[stages.snapshot]
+width_px = 640
+views = ["organs"]
 )",
                                 "/cases/chest.toml");
   EXPECT_FALSE(c.synthesize_phantom);
@@ -57,7 +65,14 @@ iterations = 200
   EXPECT_DOUBLE_EQ(c.organs[0].seed_lps_mm->x(), 10.5);
   ASSERT_TRUE(c.organs[1].seed_ijk);
   EXPECT_DOUBLE_EQ(c.organs[1].seed_ijk->z(), 12.0);
-  EXPECT_EQ(c.other_stages["segment"]["iterations"], 200);
+  // Every [stages.*] key lands in its stage's typed options.
+  EXPECT_DOUBLE_EQ(c.stages.mesh.edge_mm, 4.0);
+  EXPECT_DOUBLE_EQ(c.stages.mesh.gallbladder_wall_mm, 3.0);
+  EXPECT_EQ(c.stages.mesh.formats, (std::vector<std::string>{"stl", "inp"}));
+  EXPECT_EQ(c.stages.mesh.quality_gate, "enforce");
+  EXPECT_EQ(c.stages.guide.incision.ring_count, 3);
+  EXPECT_EQ(c.stages.snapshot.width_px, 640);
+  EXPECT_EQ(c.stages.snapshot.views, (std::vector<std::string>{"organs"}));
   // Resolved options round-trip into the manifest's JSON.
   const auto j = to_json(c);
   EXPECT_EQ(j["organs"][0]["seed_lps_mm"][2], 300.0);
@@ -104,4 +119,63 @@ seed_hu_range = [-20.0, 35.0]
     EXPECT_EQ(e.path(), fs::path("/cases/typo.toml"));
   }
   EXPECT_EQ(parse_code("[stages.segment.presets.trachea]\nalpha = \"soft\"\n"), ExitCode::case_file);
+}
+
+namespace {
+/// The message of the CaseFileError `text` raises (empty when it parses).
+std::string case_error(const std::string& text) {
+  try {
+    parse_case(text, "/cases/options.toml");
+  } catch (const Error& e) {
+    EXPECT_EQ(e.code(), ExitCode::case_file) << e.what();
+    EXPECT_EQ(e.path(), fs::path("/cases/options.toml"));
+    return e.what();
+  }
+  return {};
+}
+bool has(const std::string& text, const std::string& needle) { return text.find(needle) != std::string::npos; }
+}  // namespace
+
+// Stage options used to be recorded and then ignored; a typo ran with the defaults.
+TEST(CaseFile, StageOptionTyposWrongTypesAndRangesAreErrorsWithLineKeyAndWhatIsAllowed) {
+  std::string e = case_error("[case]\ninput = \"phantom\"\n[stages.mesh]\nedge_mm = 4.0\nbogus_key = 7\n");
+  EXPECT_TRUE(has(e, "bogus_key") && has(e, "line 5") && has(e, "[stages.mesh]")) << e;
+  e = case_error("[stages.mesh]\nedge_mn = 4.0\n");
+  EXPECT_TRUE(has(e, "did you mean 'edge_mm'")) << e;
+  e = case_error("[stages.segment]\niterations = 200\n");
+  EXPECT_TRUE(has(e, "iterations") && has(e, "line 2")) << e;
+  e = case_error("[stages.mseh]\nedge_mm = 4.0\n");
+  EXPECT_TRUE(has(e, "unknown stage 'mseh'") && has(e, "did you mean 'mesh'")) << e;
+  e = case_error("[stages.mesh]\nedge_mm = 1e9\n");
+  EXPECT_TRUE(has(e, "out of range") && has(e, "0.3") && has(e, "10")) << e;
+  e = case_error("[stages.mesh]\nedge_mm = nan\n");
+  EXPECT_TRUE(has(e, "out of range")) << e;
+  e = case_error("[stages.mesh]\nedge_mm = \"fine\"\n");
+  EXPECT_TRUE(has(e, "must be a number")) << e;
+  e = case_error("[stages.mesh]\nformats = [\"stl\", \"step\"]\n");
+  EXPECT_TRUE(has(e, "'step'") && has(e, "feb")) << e;
+  e = case_error("[stages.mesh]\nquality_gate = \"strict\"\n");
+  EXPECT_TRUE(has(e, "report, enforce")) << e;
+  e = case_error("[stages.guide]\nring_count = 2.5\n");
+  EXPECT_TRUE(has(e, "must be an integer")) << e;
+  e = case_error("[stages.snapshot]\nviews = [\"organz\"]\n");
+  EXPECT_TRUE(has(e, "organz")) << e;
+  e = case_error("[stages.attach]\nmaterial = 1\n");
+  EXPECT_TRUE(has(e, "takes no options")) << e;
+}
+
+TEST(CaseFile, PrintedDefaultCaseListsEveryOptionAndParsesBackToTheDefaults) {
+  const std::string text = default_case_with_options_text();
+  const CaseFile printed = parse_case(text, {});
+  const CaseFile embedded = default_case();
+  for (const auto& stage : configurable_stages()) {
+    EXPECT_EQ(stage_json(printed, stage), stage_json(embedded, stage)) << stage;
+    // Every option of the stage is listed by name.
+    const nlohmann::json options = stage_json(embedded, stage);  // items() must not outlive it
+    for (const auto& [key, value] : options.items())
+      if (stage != "segment") EXPECT_TRUE(has(text, "\n" + key + " = ")) << stage << "." << key;
+  }
+  EXPECT_TRUE(has(text, "edge_mm = 1.5")) << text;
+  EXPECT_TRUE(has(text, "mm")) << "units are given";
+  EXPECT_DOUBLE_EQ(StageOptions{}.mesh.edge_mm, embedded.stages.mesh.edge_mm);
 }

@@ -1,0 +1,289 @@
+#include "pipeline/stage_options.h"
+
+#include "core/errors.h"
+#include "core/format.h"
+#include "meshing/export.h"
+#include "pipeline/stage_options_toml.h"
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+#include <sstream>
+
+namespace organsmith {
+
+namespace fs = std::filesystem;
+
+MeshStageOptions::MeshStageOptions() : formats(all_mesh_formats()) {}
+
+namespace {
+
+const std::vector<std::string> kViews = {"organs", "overview", "slices", "tets", "plots"};
+
+/// One list of fields per stage; each visitor does one job with it (parse, print, to JSON).
+class Visitor {
+ public:
+  virtual ~Visitor() = default;
+  virtual void number(const char* key, double& v, double lo, double hi, const char* unit, const char* doc) = 0;
+  virtual void integer(const char* key, int& v, int lo, int hi, const char* doc) = 0;
+  virtual void boolean(const char* key, bool& v, const char* doc) = 0;
+  virtual void choice(const char* key, std::string& v, const std::vector<std::string>& allowed, const char* doc) = 0;
+  virtual void subset(const char* key, std::vector<std::string>& v, const std::vector<std::string>& allowed,
+                      const char* doc) = 0;
+};
+
+void visit(Visitor& v, MeshStageOptions& o) {
+  v.number("edge_mm", o.edge_mm, 0.3, 10.0, "mm", "target surface edge length");
+  v.number("gallbladder_wall_mm", o.gallbladder_wall_mm, 0.5, 8.0, "mm", "gallbladder wall thickness");
+  v.number("trachea_wall_mm", o.trachea_wall_mm, 0.5, 8.0, "mm", "trachea wall thickness");
+  v.boolean("tetrahedra", o.tetrahedra, "also build tetrahedral meshes");
+  v.subset("formats", o.formats, all_mesh_formats(), "export formats");
+  v.boolean("ras", o.ras, "write RAS instead of LPS coordinates");
+  v.choice("quality_gate", o.quality_gate, {"report", "enforce"},
+           "a mesh missing its quality gate: report (warn, quality.json) or enforce (stop, exit 61)");
+}
+
+void visit(Visitor& v, GuideStageOptions& o) {
+  v.subset("paths", o.only, builtin_path_names(), "built-in paths to make; [] = every path whose organ is there");
+  v.integer("first_ring", o.incision.first_ring, 1, 40, "incision: first ring from the cranial end");
+  v.integer("ring_count", o.incision.ring_count, 1, 40, "incision: rings spanned");
+  v.number("ring_pitch_mm", o.incision.ring_pitch_mm, 1.0, 30.0, "mm", "incision: cartilage ring period");
+  v.number("bed_distance_mm", o.dissection.bed_distance_mm, 0.1, 20.0, "mm",
+           "dissection: surface within this distance of the liver is liver bed");
+  v.number("centerline_spacing_mm", o.centerline.spacing_mm, 0.1, 10.0, "mm", "centreline point spacing");
+}
+
+void visit(Visitor& v, SnapshotStageOptions& o) {
+  v.integer("width_px", o.width_px, 64, 8192, "PNG width, pixels");
+  v.integer("height_px", o.height_px, 64, 8192, "PNG height, pixels");
+  v.subset("views", o.views, kViews, "views to draw");
+}
+
+template <typename F>
+void for_each_stage(StageOptions& o, F&& f) {
+  f("segment", nullptr);
+  f("mesh", [&](Visitor& v) { visit(v, o.mesh); });
+  f("attach", nullptr);
+  f("guide", [&](Visitor& v) { visit(v, o.guide); });
+  f("snapshot", [&](Visitor& v) { visit(v, o.snapshot); });
+}
+
+std::string join(const std::vector<std::string>& items, const char* sep = ", ") {
+  std::string s;
+  for (const auto& i : items) s += (s.empty() ? "" : sep) + i;
+  return s;
+}
+
+std::string line_of(const toml::node& n) {
+  const auto& src = n.source();
+  return src.begin ? " (line " + std::to_string(src.begin.line) + ")" : std::string();
+}
+
+/// Reads one stage's table: every key must be a field, of its type, inside its range.
+class Parser final : public Visitor {
+ public:
+  Parser(const toml::table& t, std::string stage, fs::path origin)
+      : t_(t), stage_(std::move(stage)), origin_(std::move(origin)) {}
+
+  void number(const char* key, double& v, double lo, double hi, const char* unit, const char*) override {
+    const toml::node* n = take(key);
+    if (!n) return;
+    const auto x = n->value<double>();
+    if (!x) fail(*n, key, "must be a number", std::string("a number of ") + unit);
+    if (!std::isfinite(*x) || *x < lo || *x > hi)
+      fail(*n, key, "is " + format_g(*x, 6) + ", out of range",
+           "allowed: " + format_g(lo, 6) + " to " + format_g(hi, 6) + " " + unit);
+    v = *x;
+  }
+  void integer(const char* key, int& v, int lo, int hi, const char*) override {
+    const toml::node* n = take(key);
+    if (!n) return;
+    const auto x = n->value_exact<std::int64_t>();
+    if (!x) fail(*n, key, "must be an integer", "e.g. " + std::to_string(v));
+    if (*x < lo || *x > hi)
+      fail(*n, key, "is " + std::to_string(*x) + ", out of range",
+           "allowed: " + std::to_string(lo) + " to " + std::to_string(hi));
+    v = int(*x);
+  }
+  void boolean(const char* key, bool& v, const char*) override {
+    const toml::node* n = take(key);
+    if (!n) return;
+    const auto x = n->value_exact<bool>();
+    if (!x) fail(*n, key, "must be true or false", "");
+    v = *x;
+  }
+  void choice(const char* key, std::string& v, const std::vector<std::string>& allowed, const char*) override {
+    const toml::node* n = take(key);
+    if (!n) return;
+    const auto x = n->value_exact<std::string>();
+    if (!x || std::find(allowed.begin(), allowed.end(), *x) == allowed.end())
+      fail(*n, key, x ? "is '" + *x + "', not an allowed value" : "must be a string", "allowed: " + join(allowed));
+    v = *x;
+  }
+  void subset(const char* key, std::vector<std::string>& v, const std::vector<std::string>& allowed,
+              const char*) override {
+    const toml::node* n = take(key);
+    if (!n) return;
+    const toml::array* a = n->as_array();
+    if (!a) fail(*n, key, "must be an array of strings", "e.g. " + std::string(key) + " = [\"" + allowed.front() + "\"]");
+    std::vector<std::string> out;
+    for (const auto& item : *a) {
+      const auto x = item.value_exact<std::string>();
+      if (!x || std::find(allowed.begin(), allowed.end(), *x) == allowed.end())
+        fail(item, key, x ? "holds '" + *x + "', not an allowed value" : "must hold strings only",
+             "allowed: " + join(allowed));
+      if (std::find(out.begin(), out.end(), *x) == out.end()) out.push_back(*x);
+    }
+    v = out;
+  }
+
+  /// After the visit: a key no field took is a typo or an option of another stage.
+  void reject_unknown(const std::set<std::string>& also_allowed = {}) const {
+    std::vector<std::string> valid = known_;
+    for (const auto& k : also_allowed) valid.push_back(k);
+    for (const auto& [k, node] : t_) {
+      const std::string key(k.str());
+      if (std::find(valid.begin(), valid.end(), key) != valid.end()) continue;
+      throw CaseFileError("unknown key '" + key + "' in [stages." + stage_ + "]" + line_of(node), origin_,
+                          valid.empty() ? "[stages." + stage_ + "] takes no options in this version"
+                                        : "did you mean '" + nearest_key(key, valid) + "'? keys: " + join(valid));
+    }
+  }
+
+ private:
+  const toml::node* take(const char* key) {
+    known_.push_back(key);
+    return t_.get(key);
+  }
+  [[noreturn]] void fail(const toml::node& n, const char* key, const std::string& what, const std::string& hint) const {
+    throw CaseFileError("[stages." + stage_ + "] " + key + " " + what + line_of(n), origin_, hint);
+  }
+  const toml::table& t_;
+  std::string stage_;
+  fs::path origin_;
+  std::vector<std::string> known_;
+};
+
+class JsonWriter final : public Visitor {
+ public:
+  nlohmann::json j = nlohmann::json::object();
+  void number(const char* key, double& v, double, double, const char*, const char*) override { j[key] = v; }
+  void integer(const char* key, int& v, int, int, const char*) override { j[key] = v; }
+  void boolean(const char* key, bool& v, const char*) override { j[key] = v; }
+  void choice(const char* key, std::string& v, const std::vector<std::string>&, const char*) override { j[key] = v; }
+  void subset(const char* key, std::vector<std::string>& v, const std::vector<std::string>&, const char*) override {
+    j[key] = v;
+  }
+};
+
+class TomlWriter final : public Visitor {
+ public:
+  std::ostringstream out;
+  void number(const char* key, double& v, double lo, double hi, const char* unit, const char* doc) override {
+    std::string value = format_g(v, 6);
+    if (value.find_first_of(".e") == std::string::npos) value += ".0";  // stays a TOML float
+    line(key, value, std::string(doc) + " (" + format_g(lo, 6) + "–" + format_g(hi, 6) + " " + unit + ")");
+  }
+  void integer(const char* key, int& v, int lo, int hi, const char* doc) override {
+    line(key, std::to_string(v), std::string(doc) + " (" + std::to_string(lo) + "–" + std::to_string(hi) + ")");
+  }
+  void boolean(const char* key, bool& v, const char* doc) override { line(key, v ? "true" : "false", doc); }
+  void choice(const char* key, std::string& v, const std::vector<std::string>& allowed, const char* doc) override {
+    line(key, "\"" + v + "\"", std::string(doc) + "; one of " + join(allowed));
+  }
+  void subset(const char* key, std::vector<std::string>& v, const std::vector<std::string>& allowed,
+              const char* doc) override {
+    std::vector<std::string> quoted;
+    for (const auto& s : v) quoted.push_back("\"" + s + "\"");
+    line(key, "[" + join(quoted) + "]", std::string(doc) + "; any of " + join(allowed));
+  }
+
+ private:
+  void line(const char* key, const std::string& value, const std::string& comment) {
+    std::string kv = std::string(key) + " = " + value;
+    if (kv.size() < 34) kv.resize(34, ' ');
+    out << kv << " # " << comment << "\n";
+  }
+};
+
+}  // namespace
+
+const std::vector<std::string>& configurable_stages() {
+  static const std::vector<std::string> names = {"segment", "mesh", "attach", "guide", "snapshot"};
+  return names;
+}
+
+std::string nearest_key(const std::string& key, const std::vector<std::string>& valid) {
+  std::string best;
+  std::size_t best_d = std::string::npos;
+  for (const auto& v : valid) {
+    // Levenshtein distance, one row at a time.
+    std::vector<std::size_t> row(v.size() + 1);
+    for (std::size_t j = 0; j <= v.size(); ++j) row[j] = j;
+    for (std::size_t i = 1; i <= key.size(); ++i) {
+      std::size_t diag = row[0];
+      row[0] = i;
+      for (std::size_t j = 1; j <= v.size(); ++j) {
+        const std::size_t up = row[j];
+        row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (key[i - 1] == v[j - 1] ? 0 : 1)});
+        diag = up;
+      }
+    }
+    if (row[v.size()] < best_d) best_d = row[v.size()], best = v;
+  }
+  return best;
+}
+
+StageOptions parse_stage_options(const toml::table* stages, const fs::path& origin) {
+  StageOptions o;
+  if (!stages) return o;
+  for (const auto& [k, node] : *stages) {
+    const std::string name(k.str());
+    const auto& known = configurable_stages();
+    if (std::find(known.begin(), known.end(), name) == known.end())
+      throw CaseFileError("unknown stage '" + name + "' in [stages]" + line_of(node), origin,
+                          "did you mean '" + nearest_key(name, known) + "'? stages: " + join(known));
+    if (!node.is_table())
+      throw CaseFileError("[stages] " + name + " must be a table" + line_of(node), origin,
+                          "write it as [stages." + name + "] followed by its keys");
+  }
+  for_each_stage(o, [&](const char* name, auto&& fields) {
+    const toml::table* t = (*stages)[name].as_table();
+    if (!t) return;
+    Parser p(*t, name, origin);
+    if constexpr (!std::is_same_v<std::decay_t<decltype(fields)>, std::nullptr_t>) fields(p);
+    p.reject_unknown(std::string(name) == "segment" ? std::set<std::string>{"presets"} : std::set<std::string>{});
+  });
+  return o;
+}
+
+nlohmann::json stage_options_json(const StageOptions& options, const std::string& stage) {
+  StageOptions o = options;  // the visitors take fields by reference
+  nlohmann::json j = nlohmann::json::object();
+  for_each_stage(o, [&](const char* name, auto&& fields) {
+    if (stage != name) return;
+    JsonWriter w;
+    if constexpr (!std::is_same_v<std::decay_t<decltype(fields)>, std::nullptr_t>) fields(w);
+    j = w.j;
+  });
+  return j;
+}
+
+std::string describe_stage_options() {
+  StageOptions o;
+  std::ostringstream out;
+  out << "# Options of each stage: every key with its default; drop a key to keep its default.\n";
+  for_each_stage(o, [&](const char* name, auto&& fields) {
+    if constexpr (!std::is_same_v<std::decay_t<decltype(fields)>, std::nullptr_t>) {
+      TomlWriter w;
+      fields(w);
+      out << "\n[stages." << name << "]\n" << w.out.str();
+    } else if (std::string(name) == "segment") {
+      out << "\n[stages.segment]\n# [stages.segment.presets.<organ>] overrides any organ preset key; "
+             "`organsmith segment --print-presets` lists them\n";
+    }
+  });
+  return out.str();
+}
+
+}  // namespace organsmith

@@ -1,0 +1,57 @@
+#pragma once
+// The typed options of each stage of a case ([stages.<stage>] in the case file). Every key is a
+// field below; one list of fields per stage (visit_*) serves parsing with range checks, the
+// manifest's JSON and `organsmith run --print-default-case`.
+
+#include "pipeline/guide_stage.h"
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace organsmith {
+
+/// [stages.mesh]: surfaces, walls and tetrahedra.
+struct MeshStageOptions {
+  double edge_mm = 1.5;               ///< target surface edge length, mm (default 1.5)
+  double gallbladder_wall_mm = 2.0;   ///< gallbladder wall thickness, mm (default 2)
+  double trachea_wall_mm = 2.5;       ///< trachea wall thickness, mm (default 2.5)
+  bool tetrahedra = true;             ///< also build tetrahedral meshes (default true)
+  std::vector<std::string> formats;   ///< export formats (default: all, see meshing/export.h)
+  bool ras = false;                   ///< write RAS instead of LPS coordinates (default false)
+  /// "report": a mesh missing its quality gate is written with warnings and quality.json says
+  /// which figure failed; "enforce": the run stops with exit 61 (as `organsmith mesh` does).
+  std::string quality_gate = "report";
+  MeshStageOptions();
+};
+
+/// [stages.snapshot]: the review pictures.
+struct SnapshotStageOptions {
+  int width_px = 1024;  ///< PNG width, pixels (default 1024)
+  int height_px = 768;  ///< PNG height, pixels (default 768)
+  std::vector<std::string> views = {"organs", "overview", "slices", "tets", "plots"};  ///< which views
+};
+
+/// Every stage's options of a case. Segment presets stay TOML (see CaseFile).
+struct StageOptions {
+  MeshStageOptions mesh;
+  GuideStageOptions guide;
+  SnapshotStageOptions snapshot;
+};
+
+/// The stages that take options in a case file, in run order.
+const std::vector<std::string>& configurable_stages();
+
+/// One stage's options as JSON (for the manifest and the stage's fingerprint).
+nlohmann::json stage_options_json(const StageOptions& o, const std::string& stage);
+
+/// TOML listing every stage option with its default, unit and allowed range, as comments and
+/// values that parse back to the defaults.
+std::string describe_stage_options();
+
+/// The key among `valid` nearest to `key` (edit distance), for "did you mean" hints.
+std::string nearest_key(const std::string& key, const std::vector<std::string>& valid);
+
+}  // namespace organsmith

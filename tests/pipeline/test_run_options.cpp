@@ -1,0 +1,108 @@
+// Case-file stage options take effect in `organsmith run`, and a changed option reruns exactly
+// the stages it affects and those after them.
+
+#include "core/errors.h"
+#include "core/sha256.h"
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <fstream>
+#include <map>
+#include <set>
+
+using organsmith::testing::run_cli;
+using organsmith::testing::ScratchDir;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
+
+nlohmann::json read_json(const fs::path& p) {
+  std::ifstream in(p);
+  return nlohmann::json::parse(in);
+}
+
+/// stage name → status of the manifest's stage records.
+std::map<std::string, std::string> statuses(const fs::path& out) {
+  std::map<std::string, std::string> s;
+  const nlohmann::json manifest = read_json(out / "manifest.json");  // the loop must not outlive it
+  for (const auto& st : manifest["stages"]) s[st["name"]] = st["status"];
+  return s;
+}
+
+const char* kSmallCase = R"([case]
+name = "options"
+input = "phantom"
+[phantom]
+size = 256
+slice_mm = 2.5
+[[organ]]
+name = "gallbladder"
+[[organ]]
+name = "trachea"
+)";
+
+}  // namespace
+
+TEST(RunOptions, StageOptionsTakeEffectAndAChangeRerunsOnlyWhatFollowsIt) {
+  ScratchDir tmp("run-options");
+  const fs::path out = tmp / "out";
+  auto write_case = [&](const std::string& stages) { std::ofstream(tmp / "case.toml") << kSmallCase << stages; };
+  const std::string mesh_options =
+      "[stages.mesh]\nedge_mm = 3.0\ngallbladder_wall_mm = 3.0\nformats = [\"stl\", \"vtu\", \"inp\"]\n";
+  write_case(mesh_options);
+  std::string log;
+  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(out) + " --until guide", &log), 0) << log;
+
+  // edge_mm = 3: every surface's mean edge within 3 mm ± 25 %.
+  for (const char* organ : {"gallbladder", "trachea"}) {
+    const auto qj = read_json(out / "meshes" / organ / "quality.json");
+    ASSERT_FALSE(qj["surfaces"].empty()) << organ;
+    for (const auto& [name, s] : qj["surfaces"].items()) {
+      const double mean = s["edge_length_mm"]["mean"].get<double>();
+      EXPECT_NEAR(mean, 3.0, 0.75) << organ << " " << name;
+    }
+  }
+  // formats: only the three asked for.
+  std::set<std::string> extensions;
+  for (const auto& e : fs::recursive_directory_iterator(out / "meshes"))
+    if (e.is_regular_file() && e.path().filename() != "quality.json") extensions.insert(e.path().extension().string());
+  EXPECT_EQ(extensions, (std::set<std::string>{".stl", ".vtu", ".inp"}));
+  // gallbladder_wall_mm = 3: the wall's inner surface lies 3 mm inside the outer one (compared
+  // with the 2 mm default below).
+  auto inner_volume = [&] {
+    const auto qj = read_json(out / "meshes" / "gallbladder" / "quality.json");
+    return qj["surfaces"]["gallbladder_wall_inner"]["volume_mm3"].get<double>();
+  };
+  const double inner_3mm = inner_volume();
+  EXPECT_EQ(read_json(out / "paths" / "trachea_incision.json")["properties"]["last_ring"], 6);  // 3 + 4 − 1
+
+  // A guide option changes only the guide stage (and the snapshot after it, not run here).
+  write_case(mesh_options + "[stages.guide]\nring_count = 3\n");
+  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(out) + " --until guide", &log), 0) << log;
+  auto st = statuses(out);
+  for (const char* s : {"phantom", "ingest", "segment", "mesh", "attach"}) EXPECT_EQ(st[s], "skipped (unchanged)") << s;
+  EXPECT_EQ(st["guide"], "ran");
+  EXPECT_EQ(read_json(out / "paths" / "trachea_incision.json")["properties"]["last_ring"], 5);  // 3 + 3 − 1
+  // A mesh option reruns mesh and guide (which reads the meshes), not what comes before.
+  write_case("[stages.mesh]\nedge_mm = 3.0\nformats = [\"stl\", \"vtu\", \"inp\"]\n[stages.guide]\nring_count = 3\n");
+  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(out) + " --until guide", &log), 0) << log;
+  st = statuses(out);
+  for (const char* s : {"phantom", "ingest", "segment", "attach"}) EXPECT_EQ(st[s], "skipped (unchanged)") << s;
+  EXPECT_EQ(st["mesh"], "ran");
+  EXPECT_EQ(st["guide"], "ran");
+  // One more millimetre of wall over the organ's ≈ 2000 mm² surface: ≈ 1500–2500 mm³ less inside.
+  const double inner_2mm = inner_volume();
+  EXPECT_GT(inner_2mm - inner_3mm, 1000.0) << inner_2mm << " vs " << inner_3mm;
+
+  // A misspelt key stops the run before anything is written, naming file, line, key and the fix.
+  write_case(mesh_options + "bogus_key = 7\n");
+  EXPECT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(tmp / "other"), &log), 20) << log;
+  EXPECT_NE(log.find("bogus_key"), std::string::npos) << log;
+  EXPECT_NE(log.find("line 15"), std::string::npos) << log;
+  EXPECT_NE(log.find("case.toml"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(tmp / "other"));
+}
