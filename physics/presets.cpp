@@ -48,8 +48,6 @@ const DerivativeTable& MaterialLibrary::table(const std::string& id) const {
 MaterialLibrary parse_material_library(const std::string& text, const std::filesystem::path& source) {
   const toml::table root = parse_toml(text, source, "the materials file", "the file must be TOML like data/materials.toml");
   MaterialLibrary lib;
-  if (const toml::table* r = root["regions"].as_table())
-    for (const auto& [k, v] : *r) lib.regions[std::string(k.str())] = v.value_or(std::string());
   if (const toml::array* arr = root["material"].as_array()) {
     for (const auto& node : *arr) {
       const toml::table* t = node.as_table();

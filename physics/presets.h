@@ -34,7 +34,6 @@ struct DerivativeTable {
 struct MaterialLibrary {
   std::vector<MaterialPreset> materials;
   std::vector<DerivativeTable> derivative_tables;
-  std::map<std::string, std::string> regions;   ///< organ region → preset id
 
   /// Throws UsageError listing the ids when `id` is unknown.
   const MaterialPreset& find(const std::string& id) const;

@@ -99,11 +99,6 @@ void fail_if(bool bad, const std::string& what, const fs::path& origin, const st
 
 }  // namespace
 
-const std::vector<std::string>& known_organs() {
-  static const std::vector<std::string> organs = {"gallbladder", "trachea"};
-  return organs;
-}
-
 CaseFile parse_case(const std::string& text, const fs::path& origin) {
   toml::table root = parse_toml(text, origin, "the case file", "fix the syntax (see README.md, 'Case file')");
   CaseFile c;
@@ -113,10 +108,20 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
   Table(&root, "top level", origin).only({"case", "phantom", "ingest", "organ", "output", "stages"});
 
   Table cs(root["case"].as_table(), "case", origin);
-  cs.only({"name", "input"});
-  std::string input = "phantom";
+  cs.only({"name", "input", "organs"});
+  std::string input = "phantom", registry_file;
   cs.get("name", c.name);
   cs.get("input", input);
+  cs.get("organs", registry_file);
+  if (!registry_file.empty()) {
+    c.registry_file = fs::weakly_canonical(base / registry_file);
+    const auto text = read_file(c.registry_file);
+    if (!text)
+      throw CaseFileError("cannot read the organ registry file " + c.registry_file.string() + " ([case] organs)",
+                          origin, "give a TOML file laid out like data/organs.toml, relative to the case file");
+    c.registry = parse_organ_registry(*text, c.registry_file, builtin_organ_registry());
+    c.registry_toml = *text;
+  }
   fail_if(input.empty(), "[case] input is empty", origin,
           "give \"phantom\" or a DICOM directory / NIfTI / NRRD / MHA path");
   c.synthesize_phantom = input == "phantom";
@@ -155,12 +160,23 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
       const toml::table* t = node.as_table();
       fail_if(!t, "each [[organ]] entry must be a table" + where(node), origin, "");
       Table ot(t, "organ", origin);
-      ot.only({"name", "seed_lps_mm", "seed_ijk"});
+      ot.only({"name", "seed_lps_mm", "seed_ijk", "label_map"});
       OrganSpec o;
       ot.get("name", o.name);
-      const auto& known = known_organs();
-      fail_if(std::find(known.begin(), known.end(), o.name) == known.end(),
-              "unknown organ '" + o.name + "'" + where(node), origin, "known organs: gallbladder, trachea");
+      std::string label_map;
+      ot.get("label_map", label_map);
+      const OrganInfo* info = c.registry.find(o.name);
+      std::string modelled;
+      for (const auto& n : c.registry.modelled()) modelled += (modelled.empty() ? "" : ", ") + n;
+      fail_if(!info || info->mesh == OrganMeshModel::none, "unknown organ '" + o.name + "'" + where(node), origin,
+              "organs with a model: " + modelled +
+                  "; add one with an organ registry file ([case] organs = \"my_organs.toml\", see data/organs.toml)");
+      if (!label_map.empty()) o.label_map = label_map == "phantom" ? fs::path("phantom") : fs::weakly_canonical(base / label_map);
+      else if (!info->segmented && c.synthesize_phantom) o.label_map = "phantom";
+      fail_if(o.label_map.empty() && !info->segmented,
+              "organ '" + o.name + "' has no segmentation preset and no label map" + where(node), origin,
+              "give label_map = \"FILE\" (a label map on the input's grid holding it as label " +
+                  std::to_string(info->label) + ")");
       o.seed_lps_mm = ot.vec3("seed_lps_mm");
       o.seed_ijk = ot.vec3("seed_ijk");
       fail_if(o.seed_lps_mm && o.seed_ijk, "organ '" + o.name + "' has both seed_lps_mm and seed_ijk",
@@ -181,6 +197,12 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
   if (const toml::node* n = root.get("stages"); n && !stages)
     throw CaseFileError("'stages' must be a table" + where(*n), origin, "write [stages.<stage>] tables");
   c.stages = parse_stage_options(stages, origin);
+  for (const auto& [organ, mm] : c.stages.mesh.wall_mm) {
+    const OrganInfo* info = c.registry.find(organ);
+    fail_if(!info || (info->mesh != OrganMeshModel::wall_body && info->mesh != OrganMeshModel::tube),
+            "[stages.mesh] wall_mm names '" + organ + "', which is no organ with a wall", origin,
+            "organs with a wall have mesh = \"wall_body\" or \"tube\" in the organ registry");
+  }
   if (const toml::table* presets = root["stages"]["segment"]["presets"].as_table()) {
     std::ostringstream ts, js;
     ts << toml::toml_formatter{*presets};
@@ -237,9 +259,11 @@ nlohmann::json to_json(const CaseFile& c) {
     nlohmann::json oj = {{"name", o.name}};
     if (o.seed_lps_mm) oj["seed_lps_mm"] = {o.seed_lps_mm->x(), o.seed_lps_mm->y(), o.seed_lps_mm->z()};
     if (o.seed_ijk) oj["seed_ijk"] = {o.seed_ijk->x(), o.seed_ijk->y(), o.seed_ijk->z()};
+    if (!o.label_map.empty()) oj["label_map"] = o.label_map.string();
     j["organs"].push_back(oj);
   }
   j["output"] = {{"dir", c.out_dir.string()}};
+  if (!c.registry_file.empty()) j["organ_registry"] = c.registry_file.string();
   j["stages"] = nlohmann::json::object();
   for (const auto& stage : configurable_stages()) j["stages"][stage] = stage_json(c, stage);
   return j;

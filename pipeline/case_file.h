@@ -3,6 +3,7 @@
 // The full reference is in README.md ("Case file").
 
 #include "pipeline/ingest.h"
+#include "pipeline/organ_registry.h"
 #include "pipeline/phantom.h"
 #include "pipeline/stage_options.h"
 
@@ -18,9 +19,12 @@ namespace organsmith {
 
 /// One organ to model and where to start looking for it.
 struct OrganSpec {
-  std::string name;                          ///< "gallbladder" or "trachea"
+  std::string name;                          ///< an organ of the registry with a mesh model
   std::optional<Eigen::Vector3d> seed_lps_mm; ///< seed in DICOM patient coordinates, mm
   std::optional<Eigen::Vector3d> seed_ijk;    ///< or a seed as a voxel index (converted once the grid is known)
+  /// Take the organ from this label map (voxels of its registry label) instead of segmenting it;
+  /// "phantom" = the synthesized phantom's ground truth. Empty: the segment stage finds it.
+  std::filesystem::path label_map;
 };
 
 /// A parsed and validated case.
@@ -32,6 +36,10 @@ struct CaseFile {
   PhantomOptions phantom;
   IngestOptions ingest;
   std::vector<OrganSpec> organs;
+  /// The organ registry: the embedded one, with the case's own registry file applied.
+  OrganRegistry registry = builtin_organ_registry();
+  std::filesystem::path registry_file;  ///< [case] organs: the case's registry file (empty = none)
+  std::string registry_toml;            ///< its text (for the segment stage's presets)
   std::filesystem::path out_dir = "out";
   /// [stages.<stage>]: every stage's typed options (defaults where the case says nothing).
   StageOptions stages;
@@ -49,9 +57,6 @@ nlohmann::json stage_json(const CaseFile& c, const std::string& stage);
 /// The embedded default case followed by every stage option with its default and unit (what
 /// `organsmith run --print-default-case` prints; it parses back to the default case).
 std::string default_case_with_options_text();
-
-/// Organ names organsmith knows.
-const std::vector<std::string>& known_organs();
 
 /// Parses a case file. Relative paths in it are taken relative to the file's directory.
 /// Throws CaseFileError naming the file, line and key on any mistake (unknown keys included).

@@ -11,6 +11,7 @@
 #include "physics/paths.h"
 #include "physics/presets.h"
 #include "pipeline/commands.h"
+#include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/output_scene.h"
 #include "pipeline/guide_stage.h"
@@ -92,7 +93,7 @@ int run_guide(const GuideFlags& f) {
       write_text_atomic(paths / (user->name + ".vtp"), path_vtp(*user));
       written = {user->name + ".json", user->name + ".vtp"};
     } else {
-      written = write_guidance_paths(out, paths, options);
+      written = write_guidance_paths(out, paths, options, registry_of_output(out));
     }
   });
   for (const auto& w : written) std::cout << "wrote " << (dest / w).string() << "\n";
@@ -112,12 +113,12 @@ struct HapticsFlags {
 /// The calibrated law of an organ region, from OUT_DIR/materials.json (the attach stage), else the
 /// built-in preset of that region.
 /// The organ region's law as a stress lookup table (the same law the preview and snapshots use).
-StressTable region_table(const fs::path& out, const std::string& region) {
-  const RegionLaw law = region_law(out, region);
+StressTable region_table(const fs::path& out, const OrganInfo& organ, const OrganRegistry& registry) {
+  const RegionLaw law = region_law(out, organ.haptic_region, registry);
   if (!law.from_output)
-    spdlog::warn("haptics: {} not in {}; using the built-in preset {}", region, (out / "materials.json").string(),
-                 law.preset_id);
-  return StressTable::from_material(law.material, law.options, 0.6);
+    spdlog::warn("haptics: {} not in {}; using the built-in preset {}", organ.haptic_region,
+                 (out / "materials.json").string(), law.preset_id);
+  return StressTable::from_material(law.material, law.options, organ.haptic_max_strain);
 }
 
 nlohmann::json percentiles_json(const Percentiles& p) {
@@ -161,20 +162,16 @@ int run_haptics(HapticsFlags f) {
   std::vector<SurfaceMesh> surfaces;
   std::vector<StressTable> tables;
   nlohmann::json organs = nlohmann::json::array();
-  struct OrganSurface {
-    std::uint8_t label;
-    const char *organ, *surface, *region;
-  };
-  for (const OrganSurface& o : {OrganSurface{1, "gallbladder", "gallbladder", "gallbladder_body"},
-                                OrganSurface{2, "trachea", "trachea_wall", "trachea_wall"}}) {
-    if (labels.count(o.label) == 0) continue;
-    const fs::path sf = out / "meshes" / o.organ / (std::string(o.surface) + ".stl");
+  const OrganRegistry registry = registry_of_output(out);
+  for (const OrganInfo& o : registry.organs) {
+    if (o.haptic_surface.empty() || labels.count(o.label) == 0) continue;
+    const fs::path sf = out / "meshes" / o.name / (o.haptic_surface + ".stl");
     if (!fs::exists(sf))
-      throw InputError(ExitCode::input_not_found, std::string("missing organ surface ") + o.surface + ".stl", sf,
+      throw InputError(ExitCode::input_not_found, "missing organ surface " + o.haptic_surface + ".stl", sf,
                        "run the mesh stage (`organsmith run`) first");
     surfaces.push_back(read_stl(sf));
-    tables.push_back(region_table(out, o.region));
-    organs.push_back({{"organ", o.organ}, {"surface", fs::relative(sf, out).generic_string()}, {"law_region", o.region},
+    tables.push_back(region_table(out, o, registry));
+    organs.push_back({{"organ", o.name}, {"surface", fs::relative(sf, out).generic_string()}, {"law_region", o.haptic_region},
                       {"triangles", surfaces.back().triangles.size()}});
   }
   std::unique_ptr<ContactModel> contact;

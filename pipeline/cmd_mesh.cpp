@@ -6,6 +6,7 @@
 #include "meshing/mesh.h"
 #include "physics/presets.h"
 #include "pipeline/commands.h"
+#include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/image_io.h"
 #include "pipeline/runner.h"
@@ -30,7 +31,7 @@ struct MeshFlags {
   std::string formats = "stl,obj,ply,vtp,vtu,msh,msh22,inp,feb";
   bool ras = false;
   std::vector<std::string> organs;  // NAME or NAME=LABEL
-  double gallbladder_wall_mm = 2.0, trachea_wall_mm = 2.5;
+  double gallbladder_wall_mm = 0.0, trachea_wall_mm = 0.0;  // 0 = the organ registry's
   bool no_tets = false, allow_failures = false;
 };
 
@@ -44,8 +45,12 @@ std::vector<std::string> split(const std::string& s, char sep) {
 }
 
 std::vector<MeshOrganSpec> organ_specs(const MeshFlags& f) {
-  std::vector<MeshOrganSpec> specs = default_organs();
-  for (auto& s : specs) s.wall_mm = s.model == OrganModel::tube ? f.trachea_wall_mm : f.gallbladder_wall_mm;
+  const OrganRegistry& registry = builtin_organ_registry();
+  std::map<std::string, double> walls;
+  if (f.gallbladder_wall_mm > 0) walls["gallbladder"] = f.gallbladder_wall_mm;
+  if (f.trachea_wall_mm > 0) walls["trachea"] = f.trachea_wall_mm;
+  std::vector<MeshOrganSpec> specs;
+  for (const auto& name : registry.modelled()) specs.push_back(mesh_spec(registry.at(name), walls));
   if (f.organs.empty()) return specs;
   std::vector<MeshOrganSpec> chosen;
   for (const auto& item : f.organs) {
@@ -70,13 +75,6 @@ std::vector<MeshOrganSpec> organ_specs(const MeshFlags& f) {
   return chosen;
 }
 
-/// Materials per tet region from the thesis presets (data/materials.toml [regions]).
-std::map<std::string, Material> region_materials() {
-  std::map<std::string, Material> out;
-  const auto lib = physics::builtin_material_library();
-  for (const auto& [region, id] : lib.regions) out[region] = lib.find(id).material;
-  return out;
-}
 
 int run_mesh(const MeshFlags& f) {
   const auto t0 = std::chrono::steady_clock::now();
@@ -91,7 +89,7 @@ int run_mesh(const MeshFlags& f) {
   ExportOptions eo;
   eo.formats = split(f.formats, ',');
   eo.ras = f.ras;
-  eo.materials = region_materials();
+  eo.materials = region_materials(builtin_organ_registry());
   {  // reject unknown formats before spending time on meshing
     const auto known = all_mesh_formats();
     for (const auto& x : eo.formats)
@@ -143,9 +141,9 @@ std::vector<Command> meshing_commands(CLI::App& app) {
   sub->add_option("--organ", flags->organs,
                   "organ to mesh, NAME or NAME=LABEL (default: gallbladder=1 trachea=2); gallbladder gets a wall and "
                   "a body, trachea a tube wall around its lumen, other names one solid body");
-  sub->add_option("--gallbladder-wall-mm", flags->gallbladder_wall_mm, "gallbladder wall thickness in mm (default 2)")
+  sub->add_option("--gallbladder-wall-mm", flags->gallbladder_wall_mm, "gallbladder wall thickness in mm (default: the organ registry's, 2)")
       ->check(CLI::PositiveNumber);
-  sub->add_option("--trachea-wall-mm", flags->trachea_wall_mm, "trachea wall thickness in mm (default 2.5)")
+  sub->add_option("--trachea-wall-mm", flags->trachea_wall_mm, "trachea wall thickness in mm (default: the organ registry's, 2.5)")
       ->check(CLI::PositiveNumber);
   sub->add_flag("--no-tets", flags->no_tets, "surfaces only (no tetrahedral meshes)");
   sub->add_flag("--allow-quality-failures", flags->allow_failures,

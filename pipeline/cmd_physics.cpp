@@ -8,6 +8,7 @@
 #include "physics/presets.h"
 #include "physics/uncertainty.h"
 #include "pipeline/commands.h"
+#include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
@@ -142,7 +143,10 @@ std::string fit_csv(const CalibrationData& d, const FitResult& r, bool cutting) 
 int run_materials(bool as_json, const std::string& model_filter) {
   const MaterialLibrary lib = builtin_material_library();
   if (as_json) {
-    nlohmann::json j = {{"materials", nlohmann::json::array()}, {"regions", lib.regions}};
+    nlohmann::json regions = nlohmann::json::object();
+    for (const auto& o : builtin_organ_registry().organs)
+      for (const auto& [region, id] : o.materials) regions[region] = id;
+    nlohmann::json j = {{"materials", nlohmann::json::array()}, {"regions", regions}};
     for (const auto& p : lib.materials) {
       if (!model_filter.empty() && p.material.model != model_filter) continue;
       nlohmann::json params = nlohmann::json::array();
@@ -172,8 +176,9 @@ int run_materials(bool as_json, const std::string& model_filter) {
     for (const auto& [k, v] : p.constants) std::cout << "    " << k << " = " << num(v) << "\n";
     std::cout << "    source: " << p.material.source << "\n";
   }
-  std::cout << "\nRegions:\n";
-  for (const auto& [region, id] : lib.regions) std::cout << "  " << region << " -> " << id << "\n";
+  std::cout << "\nRegions (organ registry, data/organs.toml):\n";
+  for (const auto& o : builtin_organ_registry().organs)
+    for (const auto& [region, id] : o.materials) std::cout << "  " << region << " -> " << id << "\n";
   std::cout << "\nDefault search boxes (calibrate --lower/--upper override):\n";
   for (const auto& name : model_names()) {
     const auto m = make_model(name);

@@ -75,8 +75,11 @@ int run_segment(const SegmentFlags& f) {
   const std::size_t n_seeds = f.seeds.size() + f.seeds_ijk.size();
   for (const auto& name : f.organs) {
     auto it = presets.find(name);
-    if (it == presets.end())
-      throw UsageError("unknown organ '" + name + "'", "organs with presets: gallbladder, trachea");
+    if (it == presets.end()) {
+      std::string known;
+      for (const auto& [organ, _] : presets) known += (known.empty() ? "" : ", ") + organ;
+      throw UsageError("unknown organ '" + name + "'", "organs with a segmentation preset: " + known);
+    }
     OrganRequest r;
     r.organ = name;
     if (it->second.needs_seed) {

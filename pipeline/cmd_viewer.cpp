@@ -7,6 +7,7 @@
 #include "physics/haptic_loop.h"
 #include "physics/models.h"
 #include "pipeline/commands.h"
+#include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
@@ -85,14 +86,6 @@ struct PreviewFlags {
   physics::ContactOptions contact;
 };
 
-/// The organs the tool touches and the law each is felt with (as `organsmith haptics`): the
-/// gallbladder with the organ law, the trachea with its wall law.
-struct TouchedOrgan {
-  const char* organ;
-  const char* region;
-};
-constexpr TouchedOrgan kTouched[] = {{"gallbladder", "gallbladder_body"}, {"trachea", "trachea_wall"}};
-
 int cmd_preview(const PreviewFlags& f) {
   PreviewOptions options;
   if (!f.size.empty()) std::tie(options.width_px, options.height_px) = parse_size(f.size);
@@ -146,26 +139,26 @@ int cmd_preview(const PreviewFlags& f) {
     haptics.path_name = chosen->line.name;
   }
 
-  // The contact surfaces: each touched organ's outermost drawn surface (the wall, or the organ
-  // itself), felt with its region's calibrated law.
+  // The contact surfaces: each organ's haptic surface of the registry (or, where the mesh stage
+  // has not run, the organ's label-map surface), felt with its region's calibrated law.
+  const OrganRegistry registry = registry_of_output(out);
   std::vector<SurfaceMesh> surfaces;
   std::vector<physics::StressTable> tables;
   std::string felt;
-  for (const auto& t : kTouched) {
+  for (const auto& organ : registry.organs) {
+    if (organ.haptic_surface.empty()) continue;
     int best = -1;
-    double best_volume = 0;
     for (std::size_t i = 0; i < os.scene.surfaces.size(); ++i) {
       const SceneSurface& s = os.scene.surfaces[i];
-      if (s.context || s.organ != t.organ) continue;
-      const double v = outer_extent_mm3(s.mesh);
-      if (best < 0 || v > best_volume) best = int(i), best_volume = v;
+      if (s.context || s.organ != organ.name) continue;
+      if (s.name == organ.haptic_surface || best < 0) best = int(i);
     }
     if (best < 0) continue;
-    const RegionLaw law = region_law(out, t.region);
+    const RegionLaw law = region_law(out, organ.haptic_region, registry);
     surfaces.push_back(os.scene.surfaces[best].mesh);
-    tables.push_back(physics::StressTable::from_material(law.material, law.options, 0.6));
+    tables.push_back(physics::StressTable::from_material(law.material, law.options, organ.haptic_max_strain));
     haptics.contact_scene_surfaces.push_back(best);
-    felt += std::string(felt.empty() ? "" : ", ") + os.scene.surfaces[best].name + " (" + t.region + ", " +
+    felt += std::string(felt.empty() ? "" : ", ") + os.scene.surfaces[best].name + " (" + organ.haptic_region + ", " +
             law.material.model + (law.from_output ? "" : ", built-in preset") + ")";
   }
   std::unique_ptr<physics::ContactModel> contact;

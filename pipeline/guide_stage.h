@@ -3,6 +3,7 @@
 // and `organsmith guide`. Defined in pipeline/runner.cpp.
 
 #include "physics/paths.h"
+#include "pipeline/organ_registry.h"
 
 #include <filesystem>
 #include <string>
@@ -27,7 +28,8 @@ const std::vector<std::string>& builtin_path_names();
 /// phantom/ground_truth.nii.gz on the same grid); writes <name>.json and <name>.vtp per path into
 /// `dest_dir` (created). Returns the file names written. Throws InputError (exit code 3) when
 /// the label map or a needed organ surface is missing.
+/// The trachea's and the liver's labels and the organs' surface names come from `registry`.
 std::vector<std::string> write_guidance_paths(const std::filesystem::path& out_dir, const std::filesystem::path& dest_dir,
-                                              const GuideStageOptions& options);
+                                              const GuideStageOptions& options, const OrganRegistry& registry);
 
 }  // namespace organsmith

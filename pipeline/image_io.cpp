@@ -97,4 +97,26 @@ void write_label_map(const LabelMap& labels, const fs::path& path) {
   itk_io::write_uint8(path.string(), plain(labels.grid), labels.labels.data());
 }
 
+double merge_organ_from_label_map(LabelMap& labels, const LabelMap& source, std::uint8_t label) {
+  const ImageGrid& g = labels.grid;
+  const bool same = g.same_geometry(source.grid);
+  std::int64_t added = 0;
+  for (std::int64_t k = 0; k < g.size_vox[2]; ++k)
+    for (std::int64_t j = 0; j < g.size_vox[1]; ++j)
+      for (std::int64_t i = 0; i < g.size_vox[0]; ++i) {
+        std::uint8_t& v = labels.labels[g.offset(i, j, k)];
+        if (v != 0) continue;
+        std::uint8_t s = 0;
+        if (same) {
+          s = source.at(i, j, k);
+        } else {
+          const Eigen::Vector3d ijk = source.grid.lps_mm_to_index(g.index_to_lps_mm(Eigen::Vector3d(double(i), double(j), double(k))));
+          const std::int64_t si = std::llround(ijk.x()), sj = std::llround(ijk.y()), sk = std::llround(ijk.z());
+          if (source.grid.contains(si, sj, sk)) s = source.at(si, sj, sk);
+        }
+        if (s == label) v = label, ++added;
+      }
+  return double(added) * g.spacing_mm.prod() / 1000.0;
+}
+
 }  // namespace organsmith

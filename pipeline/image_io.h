@@ -20,6 +20,11 @@ Volume read_volume_file(const std::filesystem::path& path);
 /// Reads a label map (values cast to uint8; throws when a value is outside 0–255).
 LabelMap read_label_map(const std::filesystem::path& path);
 
+/// Sets every background voxel of `labels` to `label` where `source` (any grid in the same patient
+/// frame; nearest voxel) carries `label`: an organ taken from another tool's label map. Voxels
+/// already labelled are kept. Returns the volume added, ml.
+double merge_organ_from_label_map(LabelMap& labels, const LabelMap& source, std::uint8_t label);
+
 /// Writes a volume as float (format from the extension). Not atomic: callers write into a
 /// staging directory (see pipeline/runner.h).
 void write_volume_file(const Volume& volume, const std::filesystem::path& path);

@@ -6,6 +6,7 @@
 #include "physics/uncertainty.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
+#include "pipeline/organ_registry.h"
 #include "viewer/label_surface.h"
 #include "viewer/mesh_files.h"
 #include "viewer/snapshot.h"
@@ -24,22 +25,7 @@ namespace organsmith {
 
 namespace fs = std::filesystem;
 
-double outer_extent_mm3(const SurfaceMesh& m) {
-  if (m.vertices_lps_mm.empty()) return 0.0;
-  Eigen::Vector3d lo = m.vertices_lps_mm[0], hi = lo;
-  for (const auto& v : m.vertices_lps_mm) lo = lo.cwiseMin(v), hi = hi.cwiseMax(v);
-  return (hi - lo).prod();
-}
-
-
 namespace {
-
-/// Label values of the organs organsmith knows (see core/volume.h `Label`).
-std::optional<std::uint8_t> organ_label(const std::string& name) {
-  for (int v = 1; v <= 5; ++v)
-    if (label_name(std::uint8_t(v)) == name) return std::uint8_t(v);
-  return std::nullopt;
-}
 
 nlohmann::json read_json_or_null(const fs::path& p) {
   std::ifstream in(p);
@@ -260,7 +246,7 @@ std::optional<Plot> monte_carlo_plot(const fs::path& dir, const std::string& ste
 /// The laws of the organ regions in materials.json (the attach stage), uniaxial, with the
 /// 5–95 % band of a Monte Carlo over the preset's standard deviations where the thesis gives
 /// them; and the CDFs of that Monte Carlo at a few stretches.
-std::vector<Plot> material_plots(const fs::path& out) {
+std::vector<Plot> material_plots(const fs::path& out, const OrganRegistry& registry) {
   std::vector<Plot> plots;
   const nlohmann::json mj = read_json_or_null(out / "materials.json");
   if (!mj.is_object() || !mj.contains("regions") || !mj["regions"].is_object()) return plots;
@@ -285,7 +271,7 @@ std::vector<Plot> material_plots(const fs::path& out) {
   for (const auto& [region, _] : mj["regions"].items()) {
     RegionLaw law;
     try {
-      law = region_law(out, region);
+      law = region_law(out, region, registry);
     } catch (const Error& e) {
       spdlog::warn("{}", e.what());
       continue;
@@ -385,7 +371,7 @@ std::vector<Plot> material_plots(const fs::path& out) {
 
 }  // namespace
 
-RegionLaw region_law(const fs::path& out, const std::string& region) {
+RegionLaw region_law(const fs::path& out, const std::string& region, const OrganRegistry& registry) {
   RegionLaw law;
   const fs::path mf = out / "materials.json";
   if (fs::exists(mf)) {
@@ -416,11 +402,13 @@ RegionLaw region_law(const fs::path& out, const std::string& region) {
     }
   }
   const physics::MaterialLibrary lib = physics::builtin_material_library();
-  const auto it = lib.regions.find(region);
-  if (it == lib.regions.end())
+  std::string preset_id;
+  for (const auto& o : registry.organs)
+    if (const auto it = o.materials.find(region); it != o.materials.end()) preset_id = it->second;
+  if (preset_id.empty())
     throw InputError(ExitCode::unsupported_input, "no material for region " + region, mf,
                      "run the attach stage, or see `organsmith materials` for the regions");
-  const physics::MaterialPreset& preset = lib.find(it->second);
+  const physics::MaterialPreset& preset = lib.find(preset_id);
   law.material = preset.material;
   law.options = physics::model_options_for(preset);
   law.preset_id = preset.id;
@@ -438,14 +426,16 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
   if (manifest.is_object() && manifest.contains("case") && manifest["case"].is_object())
     scene.case_name = manifest["case"].value("name", scene.case_name);
 
-  // Organs: those of the case, else the two organsmith models.
+  // Organs: those of the case, else every organ of the registry with a model.
+  const OrganRegistry registry = flags.registry ? *flags.registry : registry_of_output(out);
   std::vector<std::string> organ_names;
   if (manifest.is_object() && manifest.contains("case") && manifest["case"].contains("organs"))
     for (const auto& o : manifest["case"]["organs"])
       if (o.is_object() && o.contains("name")) organ_names.push_back(o["name"].get<std::string>());
-  if (organ_names.empty()) organ_names = {"gallbladder", "trachea"};
+  if (organ_names.empty()) organ_names = registry.modelled();
+  auto rgb = [](const OrganInfo& o) { return Rgb{o.colour_rgb[0], o.colour_rgb[1], o.colour_rgb[2]}; };
   for (const auto& n : organ_names)
-    if (const auto v = organ_label(n)) scene.organs.push_back({n, *v});
+    if (const OrganInfo* o = registry.find(n)) scene.organs.push_back({n, o->label, rgb(*o)});
 
   // CT: as given, else the phantom the run synthesised, else the case's input.
   if (flags.need_ct) {
@@ -490,54 +480,53 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
     if (const auto p = out / ("contours_" + o.name + ".json"); fs::exists(p))
       if (auto stack = read_contours(p, o.name)) scene.contours.push_back(std::move(*stack));
 
-  // Meshes (.vtp surfaces and paths, .vtu tetrahedra) anywhere in the output but the phantom
-  // and the snapshots, in name order so that every run draws them in the same order.
-  std::vector<fs::path> files;
-  for (auto it = fs::recursive_directory_iterator(out, ec); !ec && it != fs::recursive_directory_iterator(); ++it) {
-    const auto name = it->path().filename().string();
-    if (it->is_directory() &&
-        (name == "phantom" || name == "snapshots" || name == "paths" || name.rfind('.', 0) == 0)) {
-      it.disable_recursion_pending();
-      continue;
-    }
-    const auto ext = it->path().extension().string();
-    if (it->is_regular_file() && (ext == ".vtp" || ext == ".vtu")) files.push_back(it->path());
-  }
-  std::sort(files.begin(), files.end());
-  auto organ_of = [&](const std::string& stem) {
-    for (const auto& o : scene.organs)
-      if (stem.find(o.name) != std::string::npos) return o.name;
-    return stem;
+  // Meshes of the mesh stage: meshes/<organ>/<surface>.vtp and meshes/<organ>/<organ>.vtu, by the
+  // surfaces the registry says the organ's model has; drawn in path order, as every run does.
+  struct MeshFile {
+    fs::path path;
+    const OrganInfo* organ;
+    bool surface;
   };
+  std::vector<MeshFile> files;
+  for (const auto& so : scene.organs) {
+    const OrganInfo& info = registry.at(so.name);
+    const fs::path dir = out / "meshes" / so.name;
+    for (const auto& surface : info.surfaces())
+      if (fs::is_regular_file(dir / (surface + ".vtp"), ec)) files.push_back({dir / (surface + ".vtp"), &info, true});
+    if (fs::is_regular_file(dir / (so.name + ".vtu"), ec)) files.push_back({dir / (so.name + ".vtu"), &info, false});
+  }
+  std::sort(files.begin(), files.end(), [](const MeshFile& a, const MeshFile& b) { return a.path < b.path; });
+  std::map<std::string, std::vector<SceneSurface*>> by_organ;
   for (const auto& f : files) {
     MeshFileContents m;
     try {
-      m = read_mesh_file(f);
+      m = read_mesh_file(f.path);
     } catch (const Error& e) {
       spdlog::warn("{}", e.what());
       continue;
     }
-    const std::string stem = f.stem().string(), organ = organ_of(stem);
-    if (!m.surface.triangles.empty()) {
+    if (f.surface && !m.surface.triangles.empty()) {
       SceneSurface s;
-      s.name = stem;
-      s.organ = organ;
-      s.colour = organ_colour(organ);
+      s.name = f.path.stem().string();
+      s.organ = f.organ->name;
+      s.colour = rgb(*f.organ);
       s.mesh = std::move(m.surface);
       s.source = "mesh stage";
       scene.surfaces.push_back(std::move(s));
     }
-    for (auto& l : m.lines) scene.paths.push_back({std::move(l)});
-    if (!m.tets.tets.empty()) scene.tet_meshes.push_back({organ, std::move(m.tets)});
+    if (!f.surface && !m.tets.tets.empty()) scene.tet_meshes.push_back({f.organ->name, std::move(m.tets)});
   }
-  // An organ drawn with several surfaces: the outermost is its wall, translucent. Outermost =
-  // largest bounding box (not volume: a hollow wall encloses less volume than its lumen).
-  std::map<std::string, std::vector<SceneSurface*>> by_organ;
+  // An organ drawn with several surfaces: its wall (the registry says which) is translucent.
   for (auto& s : scene.surfaces) by_organ[s.organ].push_back(&s);
-  for (auto& [organ, list] : by_organ)
-    if (list.size() > 1) (*std::max_element(list.begin(), list.end(), [](auto* a, auto* b) {
-                            return outer_extent_mm3(a->mesh) < outer_extent_mm3(b->mesh);
-                          }))->opacity = 0.35;
+  // A solid organ the registry draws translucent (a large organ modelled for context, e.g. the
+  // liver around the gallbladder) keeps its registry opacity.
+  for (auto& [organ, list] : by_organ) {
+    const OrganInfo& info = registry.at(organ);
+    for (auto* s : list) {
+      if (list.size() > 1 && s->name == info.wall_surface()) s->opacity = 0.35;
+      if (info.mesh == OrganMeshModel::solid) s->opacity = info.opacity;
+    }
+  }
 
   // Organs the meshing stage has not (yet) produced: a label-map isosurface, said so in the title.
   if (scene.labels) {
@@ -546,7 +535,7 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
       SceneSurface s;
       s.name = o.name;
       s.organ = o.name;
-      s.colour = organ_colour(o.name);
+      s.colour = o.colour;
       s.mesh = label_surface(*scene.labels, o.label);
       s.source = "label-map isosurface (no mesh-stage output)";
       if (s.mesh.triangles.empty()) {
@@ -556,27 +545,33 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
       os.missing.push_back("the " + o.name + " mesh (meshing stage output): drawn as a label-map isosurface");
       scene.surfaces.push_back(std::move(s));
     }
-    // Context for the overview: the liver around the gallbladder, the lungs around the trachea,
-    // from the label map when it has them, else from the phantom's ground truth.
+    // Context for the overview: the registry's context organs (the liver around the gallbladder,
+    // the lungs around the trachea), from the label map when it has any, else from the phantom's
+    // ground truth.
+    std::vector<const OrganInfo*> context;
+    for (const auto& o : registry.organs)
+      if (o.mesh == OrganMeshModel::none && o.opacity > 0 &&
+          std::find(organ_names.begin(), organ_names.end(), o.name) == organ_names.end())
+        context.push_back(&o);
     const LabelMap* context_labels = scene.labels;
     std::optional<LabelMap> truth;
-    if (flags.context_step_vox > 0 && scene.labels->count(3) == 0 && scene.labels->count(4) == 0 &&
-        fs::exists(out / "phantom" / "ground_truth.nii.gz")) {
+    const bool labels_have_context =
+        std::any_of(context.begin(), context.end(), [&](const OrganInfo* o) { return scene.labels->count(o->label) > 0; });
+    if (flags.context_step_vox > 0 && !labels_have_context && fs::exists(out / "phantom" / "ground_truth.nii.gz")) {
       truth = read_label_map(out / "phantom" / "ground_truth.nii.gz");
       context_labels = &*truth;
     }
-    for (const char* name : {"liver", "lungs"}) {
-      const auto v = organ_label(name);
-      if (!v || flags.context_step_vox <= 0) continue;
+    for (const OrganInfo* o : context) {
+      if (flags.context_step_vox <= 0) break;
       SceneSurface s;
-      s.name = name;
-      s.organ = name;
-      s.colour = organ_colour(name);
-      s.opacity = std::string(name) == "liver" ? 0.3 : 0.15;
+      s.name = o->name;
+      s.organ = o->name;
+      s.colour = rgb(*o);
+      s.opacity = o->opacity;
       s.context = true;
       LabelSurfaceOptions lo;
       lo.step_vox = flags.context_step_vox;
-      s.mesh = label_surface(*context_labels, *v, lo);
+      s.mesh = label_surface(*context_labels, o->label, lo);
       s.source = truth ? "context from phantom ground truth" : "";
       if (!s.mesh.triangles.empty()) scene.surfaces.push_back(std::move(s));
     }
@@ -604,7 +599,7 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
 
   // Plots: the materials of the attach stage; calibrate / uncertainty results under OUT or named.
   if (flags.plots) {
-    for (auto& p : material_plots(out)) scene.plots.push_back(std::move(p));
+    for (auto& p : material_plots(out, registry)) scene.plots.push_back(std::move(p));
     std::vector<fs::path> dirs;
     for (const auto& d : flags.calibration_dirs) {
       if (!fs::is_directory(d, ec))

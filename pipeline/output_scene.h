@@ -7,6 +7,7 @@
 #include "core/progress.h"
 #include "core/volume.h"
 #include "physics/models.h"
+#include "pipeline/organ_registry.h"
 #include "viewer/scene.h"
 
 #include <filesystem>
@@ -38,6 +39,9 @@ struct LoadFlags {
   /// plots (directories under OUT_DIR holding them are found by themselves).
   std::vector<std::string> calibration_dirs;
   bool plots = true;  ///< build the plots (material laws, Monte Carlo CDFs, calibration fits)
+  /// The organ registry of the run; null = the one the directory's manifest names, else the
+  /// embedded one.
+  const OrganRegistry* registry = nullptr;
 };
 
 /// The calibrated law of an organ region ("gallbladder_body", "trachea_wall", …): from
@@ -49,11 +53,7 @@ struct RegionLaw {
   std::string preset_id;     ///< the preset it came from (as materials.json records it)
   bool from_output = false;  ///< true: read from OUT/materials.json
 };
-RegionLaw region_law(const std::filesystem::path& out, const std::string& region);
-
-/// Volume of a surface's bounding box, mm³: the outermost of an organ's surfaces has the largest
-/// (its wall; a hollow wall encloses less volume than its lumen, so volume would not do).
-double outer_extent_mm3(const SurfaceMesh& mesh);
+RegionLaw region_law(const std::filesystem::path& out, const std::string& region, const OrganRegistry& registry);
 
 /// Fills `os` from the output directory `out`; what is missing is listed in os.missing.
 void load_output_scene(const std::filesystem::path& out, const LoadFlags& flags, OutputScene& os,

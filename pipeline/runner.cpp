@@ -131,10 +131,10 @@ class Runner {
 
     if (!case_.organs.empty()) {
       const nlohmann::json seg_opts = stage_json(case_, "segment");
-      execute({"segment", fingerprint("segment", seg_opts.dump() + outputs_digest("ingest")),
+      execute({"segment", fingerprint("segment", seg_opts.dump() + registry_digest() + outputs_digest("ingest")),
                [&](const fs::path& staging) { write_segmentation(staging); }});
       const nlohmann::json mesh_opts = stage_json(case_, "mesh");
-      execute({"mesh", fingerprint("mesh", mesh_opts.dump() + outputs_digest("segment")),
+      execute({"mesh", fingerprint("mesh", mesh_opts.dump() + registry_digest() + outputs_digest("segment")),
                [&](const fs::path& staging) { write_meshes(staging); }});
       execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
                [&](const fs::path& staging) {
@@ -144,7 +144,7 @@ class Runner {
       execute({"guide", fingerprint("guide", stage_json(case_, "guide").dump() + outputs_digest("phantom") +
                                                  outputs_digest("segment") + outputs_digest("mesh")),
                [&](const fs::path& staging) {
-                 for (const auto& f : write_guidance_paths(out_, staging / "paths", case_.stages.guide))
+                 for (const auto& f : write_guidance_paths(out_, staging / "paths", case_.stages.guide, case_.registry))
                    spdlog::info("guide: paths/{}", f);
                }});
     }
@@ -163,13 +163,7 @@ class Runner {
     const MeshStageOptions& mo = case_.stages.mesh;
     MeshOptions options;
     options.organs.clear();
-    for (auto spec : default_organs())
-      for (const auto& o : case_.organs)
-        if (o.name == spec.name) {
-          if (spec.model == OrganModel::tube) spec.wall_mm = mo.trachea_wall_mm;
-          else if (spec.model == OrganModel::wall_body) spec.wall_mm = mo.gallbladder_wall_mm;
-          options.organs.push_back(spec);
-        }
+    for (const auto& o : case_.organs) options.organs.push_back(mesh_spec(case_.registry.at(o.name), mo.wall_mm));
     options.edge_mm = mo.edge_mm;
     options.tetrahedra = mo.tetrahedra;
     // "report" (the default): a failing figure is a warning and quality.json records it.
@@ -186,8 +180,7 @@ class Runner {
     ExportOptions ex;
     ex.formats = mo.formats;
     ex.ras = mo.ras;
-    const physics::MaterialLibrary lib = physics::builtin_material_library();
-    for (const auto& [region, preset_id] : lib.regions) ex.materials[region] = lib.find(preset_id).material;
+    ex.materials = region_materials(case_.registry);
     std::vector<std::string> warnings;
     fs::create_directories(staging / "meshes");
     export_meshes(meshes, staging / "meshes", ex, &warnings);
@@ -217,23 +210,9 @@ class Runner {
   /// The calibrated material of each organ region (physics presets, thesis tables), as written
   /// to materials.json and into the solver files.
   nlohmann::json materials_json() const {
-    const physics::MaterialLibrary lib = physics::builtin_material_library();
-    nlohmann::json regions = nlohmann::json::object();
-    for (const auto& organ : case_.organs) {
-      for (const auto& [region, preset_id] : lib.regions) {
-        if (region.rfind(organ.name + "_", 0) != 0) continue;
-        const physics::MaterialPreset& preset = lib.find(preset_id);
-        nlohmann::json params = nlohmann::json::array();
-        for (const auto& p : preset.material.parameters)
-          params.push_back({{"name", p.name}, {"value", p.value}, {"unit", p.unit}});
-        regions[region] = {{"preset", preset_id},
-                           {"model", preset.material.model},
-                           {"parameters", params},
-                           {"constants", preset.constants},
-                           {"source", preset.material.source}};
-      }
-    }
-    return {{"regions", regions}};
+    std::vector<std::string> organs;
+    for (const auto& o : case_.organs) organs.push_back(o.name);
+    return materials_json_for(case_.registry, organs);
   }
 
   /// The ingested volume: kept from the ingest stage, or read again when that stage was reused.
@@ -256,7 +235,9 @@ class Runner {
     return {};
   }
 
-  /// segment writes labels.nii.gz (input grid), contours_<organ>.json and overlays/*.png.
+  /// segment writes labels.nii.gz (input grid), contours_<organ>.json and overlays/*.png: the
+  /// organs with a segmentation preset found by the GVF snakes, the others taken from their label
+  /// maps.
   void write_segmentation(const fs::path& staging) {
     std::ifstream in(out_ / "ingest.json");
     const nlohmann::json ingest_json = nlohmann::json::parse(in);
@@ -264,16 +245,30 @@ class Runner {
     for (const auto& o : ingest_json.at("organs")) {
       OrganRequest r;
       r.organ = o.at("name").get<std::string>();
+      const OrganSpec* spec = case_organ(r.organ);
+      if (spec && !spec->label_map.empty()) continue;
       if (o.contains("seed_lps_mm"))
         r.seed_lps_mm = Eigen::Vector3d(o["seed_lps_mm"][0].get<double>(), o["seed_lps_mm"][1].get<double>(),
                                         o["seed_lps_mm"][2].get<double>());
-      // The trachea is always found automatically; a phantom seed is only a hint for reviewers.
-      if (r.organ == "trachea" && !case_has_seed(r.organ)) r.seed_lps_mm.reset();
+      // An organ found automatically ignores a phantom seed (a hint for reviewers only).
+      if (!case_.registry.at(r.organ).needs_seed && !case_has_seed(r.organ)) r.seed_lps_mm.reset();
       requests.push_back(std::move(r));
     }
     SegmentOptions options;
     options.preset_overrides_toml = case_.segment_presets_toml;
-    const SegmentationResult result = segment_organs(volume(), requests, options, progress_);
+    options.registry_toml = case_.registry_toml;
+    SegmentationResult result = segment_organs(volume(), requests, options, progress_);
+    for (const auto& spec : case_.organs) {
+      if (spec.label_map.empty()) continue;
+      const fs::path file = spec.label_map == "phantom" ? out_ / "phantom" / "ground_truth.nii.gz" : spec.label_map;
+      const OrganInfo& info = case_.registry.at(spec.name);
+      const double ml = merge_organ_from_label_map(result.labels, read_label_map(file), info.label);
+      if (ml <= 0)
+        throw InputError(ExitCode::organ_not_found,
+                         "organ " + spec.name + " (label " + std::to_string(info.label) + ") is absent from its label map",
+                         file, "check the label map and the organ's label in the organ registry");
+      spdlog::info("segment: {} {:.1f} ml from the label map {}", spec.name, ml, file.filename().string());
+    }
     write_label_map(result.labels, staging / "labels.nii.gz");
     for (const auto& organ : result.organs) {
       write_text_atomic(staging / ("contours_" + organ.organ + ".json"), contours_json(organ));
@@ -283,6 +278,12 @@ class Runner {
     }
     fs::create_directories(staging / "overlays");
     write_overlays(volume(), result, staging / "overlays");
+  }
+
+  const OrganSpec* case_organ(const std::string& name) const {
+    for (const auto& o : case_.organs)
+      if (o.name == name) return &o;
+    return nullptr;
   }
 
   bool case_has_seed(const std::string& organ) const {
@@ -329,7 +330,8 @@ class Runner {
       if (o.seed_lps_mm) p = o.seed_lps_mm, source = "case file (LPS mm)";
       else if (o.seed_ijk) p = grid.index_to_lps_mm(*o.seed_ijk), source = "case file (voxel ijk)";
       else if (phantom_seeds.count(o.name)) p = phantom_seeds[o.name], source = "phantom seeds.json";
-      else source = o.name == "trachea" ? "automatic" : "none";
+      else if (!o.label_map.empty()) source = "label map";
+      else source = case_.registry.at(o.name).needs_seed ? "none" : "automatic";
       if (p) {
         const Eigen::Vector3d ijk = grid.lps_mm_to_index(*p);
         if (!grid.contains(std::lround(ijk.x()), std::lround(ijk.y()), std::lround(ijk.z())))
@@ -343,6 +345,10 @@ class Runner {
     }
     return organs;
   }
+
+  /// The case's own organ registry, when it has one (empty otherwise: the embedded registry is
+  /// part of the tool version).
+  std::string registry_digest() const { return case_.registry_toml.empty() ? "" : sha256_hex(case_.registry_toml); }
 
   std::string fingerprint(const std::string& stage, const std::string& inputs) const {
     return sha256_hex(tool_version() + "\n" + stage + "\n" + inputs);
@@ -463,7 +469,7 @@ const std::vector<std::string>& builtin_path_names() {
 }
 
 std::vector<std::string> write_guidance_paths(const fs::path& out_dir, const fs::path& dest_dir,
-                                              const GuideStageOptions& options) {
+                                              const GuideStageOptions& options, const OrganRegistry& registry) {
   for (const auto& n : options.only)
     if (std::find(builtin_path_names().begin(), builtin_path_names().end(), n) == builtin_path_names().end())
       throw UsageError("unknown path '" + n + "'", "paths: trachea_centerline, trachea_incision, gallbladder_dissection");
@@ -494,15 +500,22 @@ std::vector<std::string> write_guidance_paths(const fs::path& out_dir, const fs:
     written.push_back(line.name + ".json");
     written.push_back(line.name + ".vtp");
   };
-  const bool want_centerline = wanted("trachea_centerline", 2), want_incision = wanted("trachea_incision", 2);
+  // The paths belong to two organs of the registry; an organ a registry lacks has no paths.
+  const OrganInfo* trachea = registry.find("trachea");
+  const OrganInfo* gallbladder = registry.find("gallbladder");
+  const OrganInfo* liver_info = registry.find("liver");
+  const bool want_centerline = trachea && wanted("trachea_centerline", trachea->label);
+  const bool want_incision = trachea && wanted("trachea_incision", trachea->label);
   if (want_centerline || want_incision) {
-    const physics::Centerline cl = physics::trachea_centerline(labels, options.centerline);
+    physics::CenterlineOptions co = options.centerline;
+    co.label = trachea->label;
+    const physics::Centerline cl = physics::trachea_centerline(labels, co);
     if (want_centerline)
       emit(cl.line, {{"cranial_extension_mm", cl.end_extension_mm[0]},
                      {"caudal_extension_mm", cl.end_extension_mm[1]},
                      {"spacing_mm", options.centerline.spacing_mm}});
     if (want_incision) {
-      const physics::SurfaceIndex wall({surface("trachea", "trachea_wall")});
+      const physics::SurfaceIndex wall({surface(trachea->name, trachea->wall_surface())});
       const physics::IncisionPath inc = physics::trachea_incision_path(cl, wall, options.incision);
       emit(inc.line, {{"length_mm", inc.length_mm},
                       {"first_ring", double(inc.first_ring)},
@@ -513,18 +526,22 @@ std::vector<std::string> write_guidance_paths(const fs::path& out_dir, const fs:
                       {"max_wall_distance_mm", inc.max_wall_distance_mm}});
     }
   }
-  if (wanted("gallbladder_dissection", 1)) {
-    const SurfaceMesh gb = surface("gallbladder", "gallbladder");
+  if (gallbladder && wanted("gallbladder_dissection", gallbladder->label)) {
+    const SurfaceMesh gb = surface(gallbladder->name, gallbladder->surfaces().front());
+    physics::DissectionOptions dopt = options.dissection;
     std::optional<LabelMap> truth;
     const LabelMap* liver = nullptr;
-    if (labels.count(options.dissection.liver_label) > 0) {
-      liver = &labels;
-    } else if (fs::exists(truth_file)) {
-      truth = read_label_map(truth_file);
-      // The phantom's ground truth is in the same patient frame (LPS mm); its grid may differ.
-      if (truth->count(options.dissection.liver_label) > 0) liver = &*truth;
+    if (liver_info) {
+      dopt.liver_label = liver_info->label;
+      if (labels.count(dopt.liver_label) > 0) {
+        liver = &labels;
+      } else if (fs::exists(truth_file)) {
+        truth = read_label_map(truth_file);
+        // The phantom's ground truth is in the same patient frame (LPS mm); its grid may differ.
+        if (truth->count(dopt.liver_label) > 0) liver = &*truth;
+      }
     }
-    const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, options.dissection);
+    const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, dopt);
     spdlog::info("guide: gallbladder liver bed from the {}{}", d.bed_source,
                  d.bed_source == "liver label" && liver != &labels ? " of the phantom ground truth" : "");
     emit(d.line, {{"bed_area_mm2", d.bed_area_mm2},

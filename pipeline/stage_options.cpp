@@ -30,12 +30,15 @@ class Visitor {
   virtual void choice(const char* key, std::string& v, const std::vector<std::string>& allowed, const char* doc) = 0;
   virtual void subset(const char* key, std::vector<std::string>& v, const std::vector<std::string>& allowed,
                       const char* doc) = 0;
+  /// A table of organ name → number (organ names are checked against the registry by the caller).
+  virtual void per_organ(const char* key, std::map<std::string, double>& v, double lo, double hi, const char* unit,
+                         const char* doc) = 0;
 };
 
 void visit(Visitor& v, MeshStageOptions& o) {
   v.number("edge_mm", o.edge_mm, 0.3, 10.0, "mm", "target surface edge length");
-  v.number("gallbladder_wall_mm", o.gallbladder_wall_mm, 0.5, 8.0, "mm", "gallbladder wall thickness");
-  v.number("trachea_wall_mm", o.trachea_wall_mm, 0.5, 8.0, "mm", "trachea wall thickness");
+  v.per_organ("wall_mm", o.wall_mm, 0.5, 8.0, "mm", "wall thickness per organ, e.g. { gallbladder = 3.0 }; "
+                                                    "{} = the organ registry's");
   v.boolean("tetrahedra", o.tetrahedra, "also build tetrahedral meshes");
   v.subset("formats", o.formats, all_mesh_formats(), "export formats");
   v.boolean("ras", o.ras, "write RAS instead of LPS coordinates");
@@ -137,6 +140,22 @@ class Parser final : public Visitor {
     v = out;
   }
 
+  void per_organ(const char* key, std::map<std::string, double>& v, double lo, double hi, const char* unit,
+                 const char*) override {
+    const toml::node* n = take(key);
+    if (!n) return;
+    const toml::table* t = n->as_table();
+    if (!t) fail(*n, key, "must be a table of organ = number", "e.g. " + std::string(key) + " = { gallbladder = 3.0 }");
+    v.clear();
+    for (const auto& [organ, value] : *t) {
+      const auto x = value.value<double>();
+      if (!x || !std::isfinite(*x) || *x < lo || *x > hi)
+        fail(value, (std::string(key) + "." + std::string(organ.str())).c_str(), "is not a number in range",
+             "allowed: " + format_g(lo, 6) + " to " + format_g(hi, 6) + " " + unit);
+      v[std::string(organ.str())] = *x;
+    }
+  }
+
   /// After the visit: a key no field took is a typo or an option of another stage.
   void reject_unknown(const std::set<std::string>& also_allowed = {}) const {
     std::vector<std::string> valid = known_;
@@ -174,6 +193,9 @@ class JsonWriter final : public Visitor {
   void subset(const char* key, std::vector<std::string>& v, const std::vector<std::string>&, const char*) override {
     j[key] = v;
   }
+  void per_organ(const char* key, std::map<std::string, double>& v, double, double, const char*, const char*) override {
+    j[key] = v.empty() ? nlohmann::json::object() : nlohmann::json(v);
+  }
 };
 
 class TomlWriter final : public Visitor {
@@ -196,6 +218,13 @@ class TomlWriter final : public Visitor {
     std::vector<std::string> quoted;
     for (const auto& s : v) quoted.push_back("\"" + s + "\"");
     line(key, "[" + join(quoted) + "]", std::string(doc) + "; any of " + join(allowed));
+  }
+  void per_organ(const char* key, std::map<std::string, double>& v, double lo, double hi, const char* unit,
+                 const char* doc) override {
+    std::vector<std::string> items;
+    for (const auto& [organ, x] : v) items.push_back(organ + " = " + format_g(x, 6));
+    line(key, "{ " + join(items) + (items.empty() ? "}" : " }"),
+         std::string(doc) + " (" + format_g(lo, 6) + "–" + format_g(hi, 6) + " " + unit + ")");
   }
 
  private:

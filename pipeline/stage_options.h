@@ -8,6 +8,7 @@
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -16,8 +17,9 @@ namespace organsmith {
 /// [stages.mesh]: surfaces, walls and tetrahedra.
 struct MeshStageOptions {
   double edge_mm = 1.5;               ///< target surface edge length, mm (default 1.5)
-  double gallbladder_wall_mm = 2.0;   ///< gallbladder wall thickness, mm (default 2)
-  double trachea_wall_mm = 2.5;       ///< trachea wall thickness, mm (default 2.5)
+  /// Wall thickness per organ, mm, e.g. { gallbladder = 3.0 }; an organ not named keeps the
+  /// organ registry's wall_mm (default: none named).
+  std::map<std::string, double> wall_mm;
   bool tetrahedra = true;             ///< also build tetrahedral meshes (default true)
   std::vector<std::string> formats;   ///< export formats (default: all, see meshing/export.h)
   bool ras = false;                   ///< write RAS instead of LPS coordinates (default false)

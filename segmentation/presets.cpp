@@ -50,20 +50,30 @@ void get_range(const toml::table& t, const std::string& organ, Seen& seen, const
 
 }  // namespace
 
-std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, std::map<std::string, OrganPreset> base) {
+std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, std::map<std::string, OrganPreset> base,
+                                                       PresetText form) {
   const toml::table root = parse_toml(text, {}, "the organ presets", "the text must be TOML like `organsmith segment --print-presets`");
   for (auto&& [k, node] : root) {
     const std::string organ(k.str());
-    const toml::table* t = node.as_table();
-    if (!t) throw CaseFileError("organ preset '" + organ + "' must be a table", {});
+    const toml::table* entry = node.as_table();
+    if (!entry) throw CaseFileError("organ preset '" + organ + "' must be a table", {});
+    // Registry form: label and needs_seed on the organ, the preset in its `segment` table; an
+    // organ without one is not segmented (its other keys belong to the registry).
+    const toml::table* t = entry;
+    if (form == PresetText::registry) {
+      t = (*entry)["segment"].as_table();
+      if (!t) continue;
+    }
     OrganPreset& p = base[organ];
     p.organ = organ;
-    Seen seen;
+    Seen seen, organ_seen;
     int label = p.label;
-    get(*t, organ, seen, "label", label);
+    const toml::table& facts = form == PresetText::registry ? *entry : *t;
+    Seen& facts_seen = form == PresetText::registry ? organ_seen : seen;
+    get(facts, organ, facts_seen, "label", label);
     if (label < 1 || label > 255) throw CaseFileError("organ preset '" + organ + ".label' must be 1–255", {});
     p.label = std::uint8_t(label);
-    get(*t, organ, seen, "needs_seed", p.needs_seed);
+    get(facts, organ, facts_seen, "needs_seed", p.needs_seed);
     get_range(*t, organ, seen, "seed_hu_range", p.seed_hu_lo, p.seed_hu_hi);
     get(*t, organ, seen, "seed_radius_mm", p.seed_radius_mm);
     get(*t, organ, seen, "region_below_hu", p.region_below_hu);
@@ -113,6 +123,8 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
   return base;
 }
 
-std::map<std::string, OrganPreset> default_organ_presets() { return parse_organ_presets(kOrgansToml); }
+std::map<std::string, OrganPreset> default_organ_presets() {
+  return parse_organ_presets(kOrgansToml, {}, PresetText::registry);
+}
 
 }  // namespace organsmith

@@ -1,7 +1,7 @@
 #pragma once
 // Organ presets: HU windows, snake parameters and anatomical size limits per organ. The defaults
-// come from data/organs.toml (embedded at build time, with the sources of its numbers); a case
-// file may override any key.
+// are the `segment` tables of the organ registry data/organs.toml (embedded at build time, with
+// the sources of its numbers); a case file may override any key or add organs.
 
 #include <cstdint>
 #include <map>
@@ -48,13 +48,20 @@ struct OrganPreset {
   int max_iterations = 300;
 };
 
-/// The embedded data/organs.toml.
+/// The embedded data/organs.toml (the organ registry; each organ's preset is its `segment` table).
 std::string_view default_organ_presets_toml();
 
-/// Parses presets from TOML text (one table per organ). Tables and keys absent from `text` keep
-/// the values in `base`. Throws CaseFileError naming the key when a value has the wrong type.
+/// How preset text is laid out.
+enum class PresetText {
+  overrides,  ///< one table per organ holding preset keys (`segment --presets`, a case's overrides)
+  registry,   ///< the organ registry: label and needs_seed on the organ, the preset in [<organ>.segment]
+};
+
+/// Parses presets from TOML text. Tables and keys absent from `text` keep the values in `base`.
+/// Throws CaseFileError naming the key when a value has the wrong type or a key is unknown.
 std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text,
-                                                       std::map<std::string, OrganPreset> base = {});
+                                                       std::map<std::string, OrganPreset> base = {},
+                                                       PresetText form = PresetText::overrides);
 
 /// The embedded presets (parsed once per call; cheap).
 std::map<std::string, OrganPreset> default_organ_presets();

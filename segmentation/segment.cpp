@@ -644,6 +644,8 @@ SegmentationResult segment_organs(const Volume& volume, const std::vector<OrganR
                                   const SegmentOptions& options, Progress& progress) {
   volume.grid.validate();
   auto presets = default_organ_presets();
+  if (!options.registry_toml.empty())
+    presets = parse_organ_presets(options.registry_toml, std::move(presets), PresetText::registry);
   if (!options.preset_overrides_toml.empty())
     presets = parse_organ_presets(options.preset_overrides_toml, std::move(presets));
   std::vector<const OrganPreset*> ps;
@@ -651,7 +653,8 @@ SegmentationResult segment_organs(const Volume& volume, const std::vector<OrganR
     auto it = presets.find(r.organ);
     if (it == presets.end())
       throw SegmentationError(ExitCode::organ_not_found, "no preset for organ '" + r.organ + "'",
-                              "organs with presets: gallbladder, trachea (data/organs.toml)");
+                              "organs with a segmentation preset are those with a [<organ>.segment] table in the registry "
+                              "(data/organs.toml or the case's own); others come from a label map");
     ps.push_back(&it->second);
   }
   if (volume.grid.size_vox[0] < 8 || volume.grid.size_vox[1] < 8)

@@ -31,6 +31,9 @@ struct SegmentOptions {
   /// TOML overriding the embedded organ presets (data/organs.toml), e.g. a case file's
   /// [segmentation.presets] table re-serialised; empty = the embedded defaults.
   std::string preset_overrides_toml;
+  /// Organ-registry TOML (the form of data/organs.toml) adding or changing organs, applied before
+  /// the overrides: a case's own registry file; empty = the embedded registry only.
+  std::string registry_toml;
   bool parallel = true;  ///< organs, propagation directions and slices on TBB workers (default true)
 };
 

@@ -20,10 +20,6 @@ struct Rgb {
   double r = 1.0, g = 1.0, b = 1.0;
 };
 
-/// The display colour of an organ by name ("gallbladder", "trachea", "liver", "lungs", "body");
-/// a neutral grey for other names. Stable across runs and views.
-Rgb organ_colour(const std::string& organ);
-
 /// One triangle surface to draw.
 struct SceneSurface {
   std::string name;   ///< e.g. "gallbladder", "gallbladder_wall_inner", "trachea_wall"
@@ -83,6 +79,7 @@ struct Plot {
 struct SceneOrgan {
   std::string name;
   std::uint8_t label = 0;
+  Rgb colour{0.6, 0.6, 0.62};  ///< its display colour (the organ registry's)
 };
 
 /// Everything a set of snapshots is made from. The volume and label map are borrowed: they

@@ -410,7 +410,7 @@ struct SnapshotRenderer::Impl {
 
     const double split = 0.42;
     const int vh = L.h - L.band, left_w = int(std::lround(split * L.w)), right_w = L.w - left_w;
-    const Rgb outline = bright(organ_colour(organ.name));
+    const Rgb outline = bright(organ.colour);
     auto outline_pd = label_outline(s, organ.label, 0.5);
 
     // Segmentation contours of this organ on the axial slice nearest to the plane.

@@ -42,8 +42,8 @@ TEST(PhysicsPresets, CitesEveryTableTheIssueNames) {
   }
   EXPECT_EQ(lib.derivative_tables.size(), 2u);
   EXPECT_DOUBLE_EQ(lib.find("fung-organ/table-5.1.2/mean").constants.at("bulk_modulus_Pa"), 39000.0);
-  for (const char* region : {"gallbladder_wall", "gallbladder_body", "trachea_wall"})
-    EXPECT_NO_THROW(lib.find(lib.regions.at(region))) << region;
+  // Every region's preset exists: checked where regions are assigned (the organ registry,
+  // tests/pipeline/test_organ_registry.cpp).
 }
 
 // The printed means of Tables 5.1.1 and 5.1.2 are the averages of their five specimen rows

@@ -46,7 +46,7 @@ seed_ijk = [256, 240, 12]
 dir = "results"
 [stages.mesh]
 edge_mm = 4.0
-gallbladder_wall_mm = 3
+wall_mm = { gallbladder = 3 }
 formats = ["stl", "inp"]
 quality_gate = "enforce"
 [stages.guide]
@@ -67,7 +67,7 @@ views = ["organs"]
   EXPECT_DOUBLE_EQ(c.organs[1].seed_ijk->z(), 12.0);
   // Every [stages.*] key lands in its stage's typed options.
   EXPECT_DOUBLE_EQ(c.stages.mesh.edge_mm, 4.0);
-  EXPECT_DOUBLE_EQ(c.stages.mesh.gallbladder_wall_mm, 3.0);
+  EXPECT_DOUBLE_EQ(c.stages.mesh.wall_mm.at("gallbladder"), 3.0);
   EXPECT_EQ(c.stages.mesh.formats, (std::vector<std::string>{"stl", "inp"}));
   EXPECT_EQ(c.stages.mesh.quality_gate, "enforce");
   EXPECT_EQ(c.stages.guide.incision.ring_count, 3);

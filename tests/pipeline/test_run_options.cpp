@@ -52,7 +52,7 @@ TEST(RunOptions, StageOptionsTakeEffectAndAChangeRerunsOnlyWhatFollowsIt) {
   const fs::path out = tmp / "out";
   auto write_case = [&](const std::string& stages) { std::ofstream(tmp / "case.toml") << kSmallCase << stages; };
   const std::string mesh_options =
-      "[stages.mesh]\nedge_mm = 3.0\ngallbladder_wall_mm = 3.0\nformats = [\"stl\", \"vtu\", \"inp\"]\n";
+      "[stages.mesh]\nedge_mm = 3.0\nwall_mm = { gallbladder = 3.0 }\nformats = [\"stl\", \"vtu\", \"inp\"]\n";
   write_case(mesh_options);
   std::string log;
   ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(out) + " --until guide", &log), 0) << log;
@@ -71,7 +71,7 @@ TEST(RunOptions, StageOptionsTakeEffectAndAChangeRerunsOnlyWhatFollowsIt) {
   for (const auto& e : fs::recursive_directory_iterator(out / "meshes"))
     if (e.is_regular_file() && e.path().filename() != "quality.json") extensions.insert(e.path().extension().string());
   EXPECT_EQ(extensions, (std::set<std::string>{".stl", ".vtu", ".inp"}));
-  // gallbladder_wall_mm = 3: the wall's inner surface lies 3 mm inside the outer one (compared
+  // wall_mm.gallbladder = 3: the wall's inner surface lies 3 mm inside the outer one (compared
   // with the 2 mm default below).
   auto inner_volume = [&] {
     const auto qj = read_json(out / "meshes" / "gallbladder" / "quality.json");

@@ -1,5 +1,7 @@
 #include "viewer_fixture.h"
 
+#include "pipeline/organ_registry.h"
+
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
 #include "test_support.h"
@@ -76,7 +78,7 @@ std::unique_ptr<TestScene> make_test_scene() {
   s.ct = &t->ct;
   s.labels = &t->labels;
   s.labels_source = "phantom ground truth";
-  s.organs = {{"gallbladder", 1}, {"trachea", 2}};
+  s.organs = {{"gallbladder", 1, organ_colour("gallbladder")}, {"trachea", 2, organ_colour("trachea")}};
   for (const auto& o : s.organs) {
     SceneSurface surf;
     surf.name = surf.organ = o.name;
@@ -173,6 +175,11 @@ std::size_t count_hue(const RgbImage& img, const Rgb& c) {
     n += ok ? 1 : 0;
   }
   return n;
+}
+
+Rgb organ_colour(const std::string& organ) {
+  const auto& c = builtin_organ_registry().at(organ).colour_rgb;
+  return {c[0], c[1], c[2]};
 }
 
 }  // namespace organsmith::testing

@@ -25,6 +25,9 @@ std::unique_ptr<TestScene> make_test_scene();
 /// Six-tet (Kuhn) subdivision of each voxel carrying `label`, sampled every `step` voxels.
 TetMesh voxel_tets(const LabelMap& labels, std::uint8_t label, int step);
 
+/// The display colour the organ registry gives `organ` (data/organs.toml).
+Rgb organ_colour(const std::string& organ);
+
 /// Pixel statistics.
 double grey_variance(const RgbImage& img);
 /// Number of pixels within `tol` (per channel, 0–255) of `c`.

@@ -38,15 +38,6 @@
 
 namespace organsmith {
 
-Rgb organ_colour(const std::string& organ) {
-  if (organ.rfind("gallbladder", 0) == 0) return {0.30, 0.62, 0.22};
-  if (organ.rfind("trachea", 0) == 0) return {0.90, 0.55, 0.50};
-  if (organ.rfind("liver", 0) == 0) return {0.55, 0.22, 0.17};
-  if (organ.rfind("lung", 0) == 0) return {0.80, 0.66, 0.72};
-  if (organ.rfind("body", 0) == 0) return {0.93, 0.80, 0.68};
-  return {0.6, 0.6, 0.62};
-}
-
 namespace viewer_detail {
 
 Ptr<vtkRenderWindow> make_window(void* x_display, int width_px, int height_px, bool offscreen) {

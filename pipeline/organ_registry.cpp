@@ -1,0 +1,305 @@
+#include "pipeline/organ_registry.h"
+
+#include "core/errors.h"
+#include "core/toml_parse.h"
+#include "physics/presets.h"
+#include "pipeline/stage_options.h"
+#include "segmentation/presets.h"
+
+#include <fstream>
+
+#include <algorithm>
+#include <cmath>
+#include <set>
+
+namespace organsmith {
+
+namespace fs = std::filesystem;
+
+std::vector<std::string> OrganInfo::regions() const {
+  switch (mesh) {
+    case OrganMeshModel::wall_body: return {name + "_wall", name + "_body"};
+    case OrganMeshModel::tube: return {name + "_wall"};
+    case OrganMeshModel::solid: return {name};
+    case OrganMeshModel::none: break;
+  }
+  return {};
+}
+
+std::vector<std::string> OrganInfo::surfaces() const {
+  switch (mesh) {
+    case OrganMeshModel::wall_body: return {name, name + "_wall_inner"};
+    case OrganMeshModel::tube: return {name + "_wall", name + "_lumen"};
+    case OrganMeshModel::solid: return {name};
+    case OrganMeshModel::none: break;
+  }
+  return {};
+}
+
+std::string OrganInfo::wall_surface() const {
+  switch (mesh) {
+    case OrganMeshModel::wall_body: return name;
+    case OrganMeshModel::tube: return name + "_wall";
+    default: return {};
+  }
+}
+
+std::string_view mesh_model_name(OrganMeshModel m) {
+  switch (m) {
+    case OrganMeshModel::wall_body: return "wall_body";
+    case OrganMeshModel::tube: return "tube";
+    case OrganMeshModel::solid: return "solid";
+    case OrganMeshModel::none: break;
+  }
+  return "none";
+}
+
+const OrganInfo* OrganRegistry::find(std::string_view name) const {
+  for (const auto& o : organs)
+    if (o.name == name) return &o;
+  return nullptr;
+}
+
+const OrganInfo* OrganRegistry::find_label(std::uint8_t label) const {
+  for (const auto& o : organs)
+    if (o.label == label) return &o;
+  return nullptr;
+}
+
+std::vector<std::string> OrganRegistry::names() const {
+  std::vector<std::string> n;
+  for (const auto& o : organs) n.push_back(o.name);
+  return n;
+}
+
+std::vector<std::string> OrganRegistry::modelled() const {
+  std::vector<std::string> n;
+  for (const auto& o : organs)
+    if (o.mesh != OrganMeshModel::none) n.push_back(o.name);
+  return n;
+}
+
+const OrganInfo& OrganRegistry::at(std::string_view name, const fs::path& origin) const {
+  if (const OrganInfo* o = find(name)) return *o;
+  std::string known;
+  for (const auto& n : names()) known += (known.empty() ? "" : ", ") + n;
+  throw CaseFileError("unknown organ '" + std::string(name) + "'", origin,
+                      "organs of the registry: " + known +
+                          "; add one with a registry file ([case] organs = \"my_organs.toml\", see data/organs.toml)");
+}
+
+std::string_view builtin_registry_toml() { return default_organ_presets_toml(); }
+
+namespace {
+
+std::string line_of(const toml::node& n) {
+  const auto& src = n.source();
+  return src.begin ? " (line " + std::to_string(src.begin.line) + ")" : std::string();
+}
+
+const std::vector<std::string> kKeys = {"label",          "needs_seed",     "mesh",
+                                        "wall_mm",        "materials",      "haptic_surface",
+                                        "haptic_region",  "haptic_max_strain", "colour",
+                                        "opacity",        "segment"};
+
+void parse_organ(const std::string& name, const toml::table& t, OrganInfo& o, const fs::path& origin) {
+  auto fail = [&](const toml::node& n, const std::string& key, const std::string& what, const std::string& hint) {
+    throw CaseFileError("organ registry: [" + name + "] " + key + " " + what + line_of(n), origin, hint);
+  };
+  for (const auto& [k, n] : t) {
+    const std::string key(k.str());
+    if (std::find(kKeys.begin(), kKeys.end(), key) == kKeys.end())
+      throw CaseFileError("organ registry: unknown key '" + key + "' in [" + name + "]" + line_of(n), origin,
+                          "did you mean '" + nearest_key(key, kKeys) + "'? (data/organs.toml explains every key)");
+  }
+  o.name = name;
+  if (const toml::node* n = t.get("label")) {
+    const auto v = n->value_exact<std::int64_t>();
+    if (!v || *v < 1 || *v > 255) fail(*n, "label", "must be an integer 1–255", "the organ's value in label maps");
+    o.label = std::uint8_t(*v);
+  }
+  if (o.label == 0) throw CaseFileError("organ registry: [" + name + "] has no label", origin, "add label = N (1–255)");
+  if (const toml::node* n = t.get("needs_seed")) {
+    const auto v = n->value_exact<bool>();
+    if (!v) fail(*n, "needs_seed", "must be true or false", "");
+    o.needs_seed = *v;
+  }
+  if (const toml::node* n = t.get("mesh")) {
+    const auto v = n->value_exact<std::string>();
+    const std::vector<std::string> models = {"wall_body", "tube", "solid", "none"};
+    if (!v || std::find(models.begin(), models.end(), *v) == models.end())
+      fail(*n, "mesh", "must be one of wall_body, tube, solid, none", "see data/organs.toml");
+    o.mesh = *v == "wall_body" ? OrganMeshModel::wall_body
+             : *v == "tube"    ? OrganMeshModel::tube
+             : *v == "solid"   ? OrganMeshModel::solid
+                               : OrganMeshModel::none;
+  }
+  auto number = [&](const char* key, double& v, double lo, double hi, const char* unit) {
+    const toml::node* n = t.get(key);
+    if (!n) return;
+    const auto x = n->value<double>();
+    if (!x || !std::isfinite(*x) || *x < lo || *x > hi)
+      fail(*n, key, "must be a number from " + std::to_string(lo) + " to " + std::to_string(hi) + " " + unit, "");
+    v = *x;
+  };
+  number("wall_mm", o.wall_mm, 0.1, 20.0, "mm");
+  number("haptic_max_strain", o.haptic_max_strain, 0.01, 2.0, "");
+  number("opacity", o.opacity, 0.0, 1.0, "");
+  auto text = [&](const char* key, std::string& v) {
+    const toml::node* n = t.get(key);
+    if (!n) return;
+    const auto x = n->value_exact<std::string>();
+    if (!x) fail(*n, key, "must be a string", "");
+    v = *x;
+  };
+  text("haptic_surface", o.haptic_surface);
+  text("haptic_region", o.haptic_region);
+  if (const toml::node* n = t.get("colour")) {
+    const toml::array* a = n->as_array();
+    bool ok = a && a->size() == 3;
+    for (std::size_t i = 0; ok && i < 3; ++i) {
+      const auto c = (*a)[i].value<double>();
+      ok = c && *c >= 0 && *c <= 1;
+      if (ok) o.colour_rgb[i] = *c;
+    }
+    if (!ok) fail(*n, "colour", "must be [r, g, b] with components in 0–1", "e.g. colour = [0.55, 0.22, 0.17]");
+  }
+  if (const toml::node* n = t.get("materials")) {
+    const toml::table* m = n->as_table();
+    if (!m) fail(*n, "materials", "must be a table of region = \"preset id\"", "");
+    o.materials.clear();
+    for (const auto& [region, id] : *m) {
+      const auto v = id.value_exact<std::string>();
+      if (!v) fail(id, "materials." + std::string(region.str()), "must be a preset id (a string)", "");
+      o.materials[std::string(region.str())] = *v;
+    }
+  }
+  if (const toml::node* n = t.get("segment"); n && !n->is_table())
+    fail(*n, "segment", "must be a table (the segmentation preset)", "write it as [" + name + ".segment]");
+  if (t.contains("segment")) o.segmented = true;
+}
+
+/// Cross-checks of one organ once every key is known.
+void check_organ(const OrganInfo& o, const fs::path& origin) {
+  auto fail = [&](const std::string& what, const std::string& hint) {
+    throw CaseFileError("organ registry: [" + o.name + "] " + what, origin, hint);
+  };
+  const auto regions = o.regions();
+  const auto surfaces = o.surfaces();
+  auto list = [](const std::vector<std::string>& v) {
+    std::string s;
+    for (const auto& x : v) s += (s.empty() ? "" : ", ") + x;
+    return s;
+  };
+  if ((o.mesh == OrganMeshModel::wall_body || o.mesh == OrganMeshModel::tube) && !(o.wall_mm > 0))
+    fail("needs wall_mm (its mesh model has a wall)", "e.g. wall_mm = 2.0");
+  for (const auto& [region, _] : o.materials)
+    if (std::find(regions.begin(), regions.end(), region) == regions.end())
+      fail("materials names region '" + region + "', which its mesh model (" +
+               std::string(mesh_model_name(o.mesh)) + ") does not have",
+           regions.empty() ? "an organ with mesh = \"none\" takes no materials" : "regions: " + list(regions));
+  const physics::MaterialLibrary lib = physics::builtin_material_library();
+  for (const auto& [region, id] : o.materials) {
+    const bool known = std::any_of(lib.materials.begin(), lib.materials.end(), [&](const auto& m) { return m.id == id; });
+    if (!known) fail("material '" + id + "' of region " + region + " is not a preset", "`organsmith materials` lists them");
+  }
+  if (!o.haptic_surface.empty() && std::find(surfaces.begin(), surfaces.end(), o.haptic_surface) == surfaces.end())
+    fail("haptic_surface '" + o.haptic_surface + "' is not one of its surfaces", "surfaces: " + list(surfaces));
+  if (!o.haptic_surface.empty() && !o.materials.count(o.haptic_region))
+    fail("haptic_region '" + o.haptic_region + "' has no material", "give one of: " + list(regions));
+}
+
+}  // namespace
+
+OrganRegistry parse_organ_registry(std::string_view text, const fs::path& origin, const OrganRegistry& base) {
+  const toml::table root = parse_toml(text, origin, "the organ registry", "fix the syntax (see data/organs.toml)");
+  OrganRegistry r = base;
+  for (const auto& [k, node] : root) {
+    const std::string name(k.str());
+    const toml::table* t = node.as_table();
+    if (!t) throw CaseFileError("organ registry: '" + name + "' must be a table" + line_of(node), origin,
+                                "write each organ as [" + name + "]");
+    OrganInfo* o = const_cast<OrganInfo*>(r.find(name));
+    if (!o) o = &r.organs.emplace_back();
+    parse_organ(name, *t, *o, origin);
+  }
+  try {  // the segmentation presets of the `segment` tables: every key known, of its type
+    parse_organ_presets(text, default_organ_presets(), PresetText::registry);
+  } catch (const Error& e) {
+    throw CaseFileError("organ registry: " + e.message(), origin, e.hint());
+  }
+  std::set<int> labels;
+  for (const auto& o : r.organs) {
+    check_organ(o, origin);
+    if (!labels.insert(o.label).second)
+      throw CaseFileError("organ registry: label " + std::to_string(o.label) + " is used by two organs (one is " +
+                              o.name + ")",
+                          origin, "give every organ its own label value");
+  }
+  return r;
+}
+
+OrganRegistry registry_of_output(const fs::path& out_dir) {
+  std::ifstream in(out_dir / "manifest.json");
+  nlohmann::json m;
+  try {
+    if (in) m = nlohmann::json::parse(in);
+  } catch (const nlohmann::json::exception&) {
+  }
+  if (!m.is_object() || !m.contains("case") || !m["case"].is_object() || !m["case"].contains("organ_registry") ||
+      !m["case"]["organ_registry"].is_string())
+    return builtin_organ_registry();
+  const fs::path file = m["case"]["organ_registry"].get<std::string>();
+  std::ifstream rf(file, std::ios::binary);
+  if (!rf)
+    throw InputError(ExitCode::input_not_found, "the organ registry file of this run is gone", file,
+                     "restore it, or rerun the case (`organsmith run`)");
+  const std::string text((std::istreambuf_iterator<char>(rf)), std::istreambuf_iterator<char>());
+  return parse_organ_registry(text, file, builtin_organ_registry());
+}
+
+MeshOrganSpec mesh_spec(const OrganInfo& organ, const std::map<std::string, double>& wall_mm) {
+  MeshOrganSpec s;
+  s.name = organ.name;
+  s.label = organ.label;
+  s.model = organ.mesh == OrganMeshModel::wall_body ? OrganModel::wall_body
+            : organ.mesh == OrganMeshModel::tube    ? OrganModel::tube
+                                                    : OrganModel::solid;
+  s.wall_mm = organ.wall_mm;
+  if (const auto it = wall_mm.find(organ.name); it != wall_mm.end()) s.wall_mm = it->second;
+  return s;
+}
+
+std::map<std::string, Material> region_materials(const OrganRegistry& registry) {
+  const physics::MaterialLibrary lib = physics::builtin_material_library();
+  std::map<std::string, Material> out;
+  for (const auto& o : registry.organs)
+    for (const auto& [region, id] : o.materials) out[region] = lib.find(id).material;
+  return out;
+}
+
+nlohmann::json materials_json_for(const OrganRegistry& registry, const std::vector<std::string>& organs) {
+  const physics::MaterialLibrary lib = physics::builtin_material_library();
+  nlohmann::json regions = nlohmann::json::object();
+  for (const auto& name : organs) {
+    for (const auto& [region, preset_id] : registry.at(name).materials) {
+      const physics::MaterialPreset& preset = lib.find(preset_id);
+      nlohmann::json params = nlohmann::json::array();
+      for (const auto& p : preset.material.parameters)
+        params.push_back({{"name", p.name}, {"value", p.value}, {"unit", p.unit}});
+      regions[region] = {{"preset", preset_id},
+                         {"model", preset.material.model},
+                         {"parameters", params},
+                         {"constants", preset.constants},
+                         {"source", preset.material.source}};
+    }
+  }
+  return {{"regions", regions}};
+}
+
+const OrganRegistry& builtin_organ_registry() {
+  static const OrganRegistry r = parse_organ_registry(builtin_registry_toml(), "data/organs.toml (embedded)");
+  return r;
+}
+
+}  // namespace organsmith
