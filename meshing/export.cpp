@@ -427,7 +427,8 @@ std::string quality_json(const OrganMesh& organ) {
     for (const auto& [id, name] : organ.region_names) regions[std::to_string(id)] = name;
     j["tetrahedra"]["regions"] = regions;
   }
-  j["seconds"] = {{"surfaces", organ.seconds_surface}, {"tetrahedra", organ.seconds_tets}};
+  // No wall times here: the file is a result, byte-identical for the same input and options
+  // (the manifest records how long each stage took).
   j["warnings"] = organ.warnings;
   bool ok = organ.volume_quality.ok() || organ.volume.tets.empty();
   for (const auto& s : organ.surfaces) ok = ok && s.quality.ok();

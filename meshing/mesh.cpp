@@ -513,6 +513,8 @@ OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Prog
     tbb::this_task_arena::isolate([&] {
       try {
         meshed[i] = mesh_one(labels, present[i], options, progress, started);
+      } catch (const MeshInputError& e) {  // name the organ: the deep steps do not know it
+        errors[i] = std::make_exception_ptr(MeshInputError(present[i].name + ": " + e.message(), e.hint()));
       } catch (...) {
         errors[i] = std::current_exception();
       }

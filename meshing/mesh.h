@@ -111,6 +111,14 @@ OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Prog
 
 namespace organsmith {
 
+/// A label map (or an organ in it) that cannot be meshed (ExitCode::mesh_input): empty, organ
+/// absent, a mask too small or too thin for a closed surface at the edge length asked for.
+class MeshInputError : public Error {
+ public:
+  explicit MeshInputError(std::string message, std::string hint = {})
+      : Error(ExitCode::mesh_input, std::move(message), {}, std::move(hint)) {}
+};
+
 /// A mesh that fails its quality gate (ExitCode::mesh_quality). The message lists every
 /// failing figure per surface.
 class MeshQualityError : public Error {

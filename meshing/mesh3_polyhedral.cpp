@@ -4,6 +4,7 @@
 
 #include "meshing/c3t3_to_tets.h"
 #include "meshing/detail.h"
+#include "meshing/mesh.h"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
 #include <CGAL/Mesh_complex_3_in_triangulation_3.h>
@@ -37,7 +38,8 @@ TetMesh mesh3_tets_polyhedral(const SurfaceMesh& closed, std::int32_t region, do
   for (const auto& p : closed.vertices_lps_mm) vs.push_back(mesh.add_vertex(Point(p.x(), p.y(), p.z())));
   for (const auto& t : closed.triangles)
     if (mesh.add_face(vs[t[0]], vs[t[1]], vs[t[2]]) == Mesh::null_face())
-      throw std::runtime_error("tetrahedral meshing: the surface is not a manifold triangle mesh");
+      throw MeshInputError("tetrahedral meshing: the surface is not a manifold triangle mesh",
+      "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
 
   CGAL::get_default_random() = CGAL::Random(0);
   Domain domain(mesh);

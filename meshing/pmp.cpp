@@ -3,6 +3,7 @@
 // flat cuts with caps.
 
 #include "meshing/detail.h"
+#include "meshing/mesh.h"
 
 #include <CGAL/AABB_traits.h>
 #include <CGAL/AABB_tree.h>
@@ -273,7 +274,8 @@ class PhaseClock {
 SurfaceMesh repair_and_remesh(const SurfaceMesh& in, const RemeshParams& p, std::vector<std::string>& notes) {
   PhaseClock clock(p);
   Mesh m = to_cgal(in);
-  if (m.number_of_faces() == 0) throw std::runtime_error("the sampled surface is empty");
+  if (m.number_of_faces() == 0) throw MeshInputError("the sampled surface is empty",
+      "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
 
   const std::size_t components = PMP::connected_components(
       m, m.add_property_map<F, std::size_t>("f:cc", 0).first);
@@ -372,7 +374,8 @@ SurfaceMesh clip_slab(const SurfaceMesh& in, int axis, double lo, double hi) {
   n[axis] = 1;
   ok = ok && PMP::clip(m, K::Plane_3(n[0], n[1], n[2], -hi), CGAL::parameters::clip_volume(true));
   if (!ok || !CGAL::is_closed(m))
-    throw std::runtime_error("the flat cut of the surface did not close (the sampled surface self-intersects)");
+    throw MeshInputError("the flat cut of the surface did not close (the sampled surface self-intersects)",
+      "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
   return canonical_order(from_cgal(std::move(m)));
 }
 
@@ -401,7 +404,8 @@ SurfaceMesh tube_wall_from_surfaces(const SurfaceMesh& outer, const SurfaceMesh&
   for (const auto& t : lumen.triangles)
     if (cap_of(lumen, t) < 0) soup.triangles.push_back({t[0] + shift, t[2] + shift, t[1] + shift});
     else ++lumen_caps;
-  if (outer_caps == 0 || lumen_caps == 0) throw std::runtime_error("tube wall: the surfaces have no flat caps to join");
+  if (outer_caps == 0 || lumen_caps == 0) throw MeshInputError("tube wall: the surfaces have no flat caps to join",
+      "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
 
   // Per cut plane: the rims are the border edges on it; the annulus between them is their
   // constrained Delaunay triangulation, faces at odd nesting depth (inside the outer rim,
@@ -443,7 +447,8 @@ SurfaceMesh tube_wall_from_surfaces(const SurfaceMesh& outer, const SurfaceMesh&
     }
     if (rim_edges == 0) continue;
     if (cdt.number_of_vertices() != handle.size())
-      throw std::runtime_error("tube wall: rim vertices coincide in the cap plane");
+      throw MeshInputError("tube wall: rim vertices coincide in the cap plane",
+      "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
     for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = -1;
     std::vector<CDT::Face_handle> front{cdt.infinite_face()};
     cdt.infinite_face()->info() = 0;
@@ -481,7 +486,8 @@ SurfaceMesh tube_wall_from_surfaces(const SurfaceMesh& outer, const SurfaceMesh&
       soup.triangles.push_back(t);
     }
   }
-  if (soup.triangles.size() == tube_triangles) throw std::runtime_error("tube wall: no annular cap was made");
+  if (soup.triangles.size() == tube_triangles) throw MeshInputError("tube wall: no annular cap was made",
+      "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
 
   // Remesh the caps only: every edge that is not between two cap triangles is held.
   // Only the vertices still used (the old caps' inner vertices are not).
@@ -500,10 +506,12 @@ SurfaceMesh tube_wall_from_surfaces(const SurfaceMesh& outer, const SurfaceMesh&
     }
     polys.push_back(poly);
   }
-  if (!PMP::is_polygon_soup_a_polygon_mesh(polys)) throw std::runtime_error("tube wall: the joined surface is not a manifold");
+  if (!PMP::is_polygon_soup_a_polygon_mesh(polys)) throw MeshInputError("tube wall: the joined surface is not a manifold",
+      "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
   Mesh m;
   PMP::polygon_soup_to_polygon_mesh(points, polys, m);
-  if (!CGAL::is_closed(m)) throw std::runtime_error("tube wall: the joined surface is not closed");
+  if (!CGAL::is_closed(m)) throw MeshInputError("tube wall: the joined surface is not closed",
+      "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
   clock.done("join: soup and annuli");
   auto cap = m.add_property_map<F, bool>("f:cap", false).first;
   std::vector<F> caps;
@@ -529,7 +537,8 @@ SurfaceMesh tube_wall_from_surfaces(const SurfaceMesh& outer, const SurfaceMesh&
   clock.done("join: cap remeshing");
   improve_angles(m, p.min_angle_deg, p.target_edge_mm, true);
   clock.done("join: angles");
-  if (!CGAL::is_closed(m)) throw std::runtime_error("tube wall: remeshing the caps opened the surface");
+  if (!CGAL::is_closed(m)) throw MeshInputError("tube wall: remeshing the caps opened the surface",
+      "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
   if (!PMP::is_outward_oriented(m)) PMP::reverse_face_orientations(m);
   SurfaceMesh out = from_cgal(std::move(m));
   clock.done("join: orient");

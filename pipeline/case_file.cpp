@@ -204,21 +204,27 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
             "organs with a wall have mesh = \"wall_body\" or \"tube\" in the organ registry");
   }
   if (const toml::table* presets = root["stages"]["segment"]["presets"].as_table()) {
-    std::ostringstream ts, js;
+    std::ostringstream ts;
     ts << toml::toml_formatter{*presets};
-    js << toml::json_formatter{*presets};
-    c.segment_presets_toml = ts.str();
-    c.segment_presets = nlohmann::json::parse(js.str());
-    try {
-      parse_organ_presets(c.segment_presets_toml, default_organ_presets());
-    } catch (const Error& e) {
-      throw CaseFileError(e.message() + " (in [stages.segment.presets])", origin, e.hint());
-    }
+    set_segment_presets(c, ts.str(), origin);
   } else if (const toml::node* p = root["stages"]["segment"]["presets"].node()) {
     throw CaseFileError("[stages.segment] presets must be a table" + where(*p), origin,
                         "write [stages.segment.presets.<organ>] tables");
   }
   return c;
+}
+
+void set_segment_presets(CaseFile& c, const std::string& toml_text, const fs::path& origin) {
+  try {
+    parse_organ_presets(toml_text, default_organ_presets());
+  } catch (const Error& e) {
+    throw CaseFileError(e.message() + " (in the segmentation presets)", origin, e.hint());
+  }
+  const toml::table t = parse_toml(toml_text, origin, "the segmentation presets", "");
+  std::ostringstream js;
+  js << toml::json_formatter{t};
+  c.segment_presets_toml = toml_text;
+  c.segment_presets = nlohmann::json::parse(js.str());
 }
 
 CaseFile load_case_file(const fs::path& path) {

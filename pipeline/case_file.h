@@ -63,6 +63,9 @@ std::string default_case_with_options_text();
 CaseFile load_case_file(const std::filesystem::path& path);
 /// Parses case text; `origin` names it in errors and anchors relative paths.
 CaseFile parse_case(const std::string& toml_text, const std::filesystem::path& origin);
+/// Sets the case's segmentation preset overrides (TOML, one table per organ, as
+/// `organsmith segment --presets` takes them); CaseFileError naming `origin` on a bad key.
+void set_segment_presets(CaseFile& c, const std::string& toml_text, const std::filesystem::path& origin);
 /// The embedded default case (data/default_case.toml).
 CaseFile default_case();
 /// The embedded default case's text.
@@ -70,5 +73,14 @@ const std::string& default_case_text();
 
 /// The case as resolved options, for the manifest.
 nlohmann::json to_json(const CaseFile& c);
+
+/// The case a manifest recorded (the reader of to_json's output, validated like a case file),
+/// for commands that continue a run: `mesh DIR`, `guide DIR`, `snapshot DIR`. Throws InputError
+/// naming `manifest_file` when it records no usable case.
+CaseFile case_from_manifest(const nlohmann::json& manifest, const std::filesystem::path& manifest_file);
+
+/// The case of the run that wrote `dir` (its manifest's), with out_dir = `dir`; nothing when
+/// `dir` holds no manifest that records a case (e.g. files copied there by hand).
+std::optional<CaseFile> case_of_run(const std::filesystem::path& dir);
 
 }  // namespace organsmith

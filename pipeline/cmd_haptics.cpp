@@ -11,6 +11,7 @@
 #include "physics/paths.h"
 #include "physics/presets.h"
 #include "pipeline/commands.h"
+#include "pipeline/case_file.h"
 #include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/output_scene.h"
@@ -78,6 +79,25 @@ int run_guide(const GuideFlags& f) {
                        "names: trachea_centerline, trachea_incision, gallbladder_dissection; or a CSV/JSON file");
     }
   }
+  // Every built-in path of a run: the run's guide stage itself, with the flags given here.
+  if (f.path.empty())
+    if (std::optional<CaseFile> c = case_of_run(out)) {
+      const GuideStageOptions defaults;
+      GuideStageOptions& g = c->stages.guide;
+      if (f.options.incision.first_ring != defaults.incision.first_ring) g.incision.first_ring = f.options.incision.first_ring;
+      if (f.options.incision.ring_count != defaults.incision.ring_count) g.incision.ring_count = f.options.incision.ring_count;
+      if (f.options.incision.ring_pitch_mm != defaults.incision.ring_pitch_mm)
+        g.incision.ring_pitch_mm = f.options.incision.ring_pitch_mm;
+      if (f.options.dissection.bed_distance_mm != defaults.dissection.bed_distance_mm)
+        g.dissection.bed_distance_mm = f.options.dissection.bed_distance_mm;
+      RunOptions ro;
+      ro.from = ro.until = "guide";
+      NullProgress quiet;
+      const RunSummary summary = run_case(*c, ro, quiet);
+      for (const auto& o : summary.stages.back().outputs)
+        std::cout << "wrote " << (summary.out_dir / o["path"].get<std::string>()).string() << "\n";
+      return 0;
+    }
   // Every file is staged, then moved into OUT_DIR/paths: a failure leaves nothing behind. Each
   // named path is its own stage, so that adding one keeps the others.
   OutputDir dir(out, OutputDirOptions{.in_place = true, .command = "guide"});

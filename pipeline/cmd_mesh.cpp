@@ -8,6 +8,7 @@
 #include "pipeline/commands.h"
 #include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"
+#include "pipeline/case_file.h"
 #include "pipeline/image_io.h"
 #include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
@@ -16,6 +17,7 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <fstream>
 #include <memory>
 #include <sstream>
 
@@ -27,8 +29,8 @@ namespace {
 
 struct MeshFlags {
   std::string input, out;
-  double edge_mm = 1.5;
-  std::string formats = "stl,obj,ply,vtp,vtu,msh,msh22,inp,feb";
+  double edge_mm = 0.0;  // 0 = not given: 1.5, or the run's [stages.mesh] edge_mm
+  std::string formats;   // empty = not given: all, or the run's formats
   bool ras = false;
   std::vector<std::string> organs;  // NAME or NAME=LABEL
   double gallbladder_wall_mm = 0.0, trachea_wall_mm = 0.0;  // 0 = the organ registry's
@@ -76,18 +78,56 @@ std::vector<MeshOrganSpec> organ_specs(const MeshFlags& f) {
 }
 
 
+/// `mesh DIR`: the mesh and attach stages of the run (or `segment`) that wrote DIR, with its case's
+/// options and the flags given here: the same files as `organsmith run` writes.
+int continue_run(const MeshFlags& f) {
+  if (!f.out.empty() && fs::weakly_canonical(fs::absolute(f.out)) != fs::weakly_canonical(fs::absolute(f.input)))
+    throw UsageError("`mesh DIR` writes into DIR (DIR/meshes/)", "drop --out, or give a label map file to mesh elsewhere");
+  if (!f.organs.empty())
+    throw UsageError("--organ applies to a label map file", "`mesh DIR` meshes the organs of DIR's case");
+  std::optional<CaseFile> run = case_of_run(f.input);
+  if (!run)
+    throw InputError(ExitCode::input_not_found, "the directory holds no run", fs::path(f.input) / "manifest.json",
+                     "give a label map file, or the directory `organsmith segment` or `run` wrote");
+  CaseFile& c = *run;
+  MeshStageOptions& m = c.stages.mesh;
+  if (f.edge_mm > 0) m.edge_mm = f.edge_mm;
+  if (!f.formats.empty()) m.formats = split(f.formats, ',');
+  if (f.ras) m.ras = true;
+  if (f.no_tets) m.tetrahedra = false;
+  if (f.gallbladder_wall_mm > 0) m.wall_mm["gallbladder"] = f.gallbladder_wall_mm;
+  if (f.trachea_wall_mm > 0) m.wall_mm["trachea"] = f.trachea_wall_mm;
+  m.quality_gate = f.allow_failures ? "report" : "enforce";
+  {
+    const auto known = all_mesh_formats();
+    for (const auto& x : m.formats)
+      if (std::find(known.begin(), known.end(), x) == known.end())
+        throw UsageError("unknown mesh format '" + x + "'", "choose from stl, obj, ply, vtp, vtu, msh, msh22, inp, feb");
+  }
+  RunOptions ro;
+  ro.from = "mesh";
+  ro.until = "attach";
+  TerminalProgress progress;
+  const RunSummary summary = run_case(c, ro, progress);
+  progress.finish();
+  spdlog::info("meshes and materials written into {} (meshes/, materials.json)", summary.out_dir.string());
+  return 0;
+}
+
 int run_mesh(const MeshFlags& f) {
   const auto t0 = std::chrono::steady_clock::now();
   if (!fs::exists(f.input)) throw InputError(ExitCode::input_not_found, "the label map does not exist", f.input);
+  if (fs::is_directory(f.input)) return continue_run(f);
+  if (f.out.empty()) throw UsageError("--out is required with a label map file", "e.g. --out meshes");
   OutputDir out(f.out, OutputDirOptions{.inputs = {f.input}, .command = "mesh"});
   const LabelMap labels = read_label_map(f.input);
   MeshOptions options;
-  options.edge_mm = f.edge_mm;
+  options.edge_mm = f.edge_mm > 0 ? f.edge_mm : 1.5;
   options.organs = organ_specs(f);
   options.tetrahedra = !f.no_tets;
   options.enforce_quality = !f.allow_failures;
   ExportOptions eo;
-  eo.formats = split(f.formats, ',');
+  if (!f.formats.empty()) eo.formats = split(f.formats, ',');
   eo.ras = f.ras;
   eo.materials = region_materials(builtin_organ_registry());
   {  // reject unknown formats before spending time on meshing
@@ -132,8 +172,13 @@ std::vector<Command> meshing_commands(CLI::App& app) {
   auto flags = std::make_shared<MeshFlags>();
   auto* sub = app.add_subcommand(
       "mesh", "label map → organ surfaces, wall bodies and tetrahedral meshes (STL OBJ PLY VTP VTU MSH INP FEB)");
-  sub->add_option("LABELS", flags->input, "label map (.nii/.nii.gz/.nrrd/.mha)")->required();
-  sub->add_option("--out", flags->out, "output directory: new, empty, or one organsmith wrote before (its earlier outputs are replaced; other files are never touched)")->required();
+  sub->add_option("LABELS", flags->input,
+                  "label map (.nii/.nii.gz/.nrrd/.mha), or the directory of `organsmith segment`/`run` to continue "
+                  "(its mesh and attach stages, into DIR/meshes/ and DIR/materials.json)")
+      ->required();
+  sub->add_option("--out", flags->out,
+                  "output directory for a label map file: new, empty, or one organsmith wrote before (its earlier "
+                  "outputs are replaced; other files are never touched)");
   sub->add_option("--edge-mm", flags->edge_mm, "target surface edge length in mm (default 1.5)")
       ->check(CLI::PositiveNumber);
   sub->add_option("--formats", flags->formats, "comma-separated: stl,obj,ply,vtp,vtu,msh,msh22,inp,feb (default: all)");

@@ -33,6 +33,7 @@ struct SegmentFlags {
   std::vector<std::string> seeds;      // "X,Y,Z" LPS mm
   std::vector<std::string> seeds_ijk;  // "I,J,K"
   std::string presets;                 // TOML file overriding data/organs.toml
+  std::string name;                    // case name (titles, manifest); default: the output folder's name
   bool print_presets = false;
 };
 
@@ -101,34 +102,31 @@ int run_segment(const SegmentFlags& f) {
     throw UsageError(std::to_string(n_seeds) + " seeds given for " + std::to_string(next_seed) + " seeded organs",
                      "give one --seed per --organ gallbladder; the trachea needs none");
 
-  // Checked before the long work: never into or above the input, never over a user's files.
-  OutputDir out(f.out, OutputDirOptions{.inputs = {f.input}, .command = "segment"});
+  // The segment command is the run of a case made from its flags, up to the segment stage: the
+  // same writers, the same files (ingest.json, labels.nii.gz, contours_<organ>.json, overlays/,
+  // manifest.json), and `mesh DIR`, `guide DIR`, `snapshot DIR` continue it.
+  CaseFile c;
+  c.name = f.name.empty() ? fs::absolute(f.out).lexically_normal().filename().string() : f.name;
+  if (c.name.empty()) c.name = "case";
+  c.input = fs::weakly_canonical(fs::absolute(f.input));
+  c.out_dir = f.out;
+  for (const auto& r : requests) {
+    OrganSpec o;
+    o.name = r.organ;
+    o.seed_lps_mm = r.seed_lps_mm;
+    if (r.seed_ijk) o.seed_ijk = Eigen::Vector3d(double((*r.seed_ijk)[0]), double((*r.seed_ijk)[1]), double((*r.seed_ijk)[2]));
+    c.organs.push_back(std::move(o));
+  }
+  if (!options.preset_overrides_toml.empty()) set_segment_presets(c, options.preset_overrides_toml, f.presets);
+  RunOptions ro;
+  ro.until = "segment";
+  ro.all_or_nothing = true;
   TerminalProgress progress;
-  const IngestResult in = ingest(f.input, IngestOptions{}, progress);
-  const SegmentationResult r = segment_organs(in.volume, requests, options, progress);
+  const RunSummary summary = run_case(c, ro, progress);
   progress.finish();
-
-  const fs::path final_dir = out.path();
-  out.commit("segment", [&](const fs::path& staging) {
-    write_label_map(r.labels, staging / "labels.nii.gz");
-    nlohmann::json summary = {{"input_format", in.report.format}, {"organs", nlohmann::json::array()}};
-    for (const auto& o : r.organs) {
-      write_text_atomic(staging / ("contours_" + o.organ + ".json"), contours_json(o));
-      nlohmann::json jo = {{"organ", o.organ},          {"label", o.label},
-                           {"volume_ml", o.volume_ml},  {"slices", {o.first_slice, o.last_slice}},
-                           {"contours", o.contours.contours.size()}, {"notes", o.notes}};
-      if (o.seed_lps_mm) jo["seed_lps_mm"] = {o.seed_lps_mm->x(), o.seed_lps_mm->y(), o.seed_lps_mm->z()};
-      summary["organs"].push_back(jo);
-    }
-    write_text_atomic(staging / "segmentation.json", summary.dump(2) + "\n");
-    write_overlays(in.volume, r, staging);
-  });
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  for (const auto& o : r.organs)
-    spdlog::info("{}: {:.2f} ml on slices {}–{} ({})", o.organ, o.volume_ml, o.first_slice, o.last_slice,
-                 o.notes.empty() ? "" : o.notes.back());
-  spdlog::info("segmentation written to {} in {:.2f} s: labels.nii.gz, contours_*.json, overlay_*.png",
-               final_dir.string(), s);
+  spdlog::info("segmentation written to {} in {:.2f} s: labels.nii.gz, contours_<organ>.json, overlays/, ingest.json",
+               summary.out_dir.string(), s);
   return 0;
 }
 
@@ -140,8 +138,10 @@ std::vector<Command> segmentation_commands(CLI::App& app) {
       "segment",
       "Segment organs with GVF active contours, slice by slice: the gallbladder from one seed inside it,\n"
       "the trachea automatically (most cranial round midline air lumen down to the carina).\n"
-      "Writes DIR/labels.nii.gz (1 gallbladder, 2 trachea; the input's grid), DIR/contours_<organ>.json\n"
-      "(LPS mm), DIR/overlay_<organ>.png for review, and DIR/segmentation.json.");
+      "Runs the ingest and segment stages of `organsmith run` on a case made from these flags and writes\n"
+      "what they write: DIR/labels.nii.gz (the organ registry's labels: 1 gallbladder, 2 trachea; the\n"
+      "input's grid), DIR/contours_<organ>.json (LPS mm), DIR/overlays/*.png for review, DIR/ingest.json\n"
+      "and DIR/manifest.json. `organsmith mesh DIR`, `guide DIR` and `snapshot DIR` continue from there.");
   sub->add_option("INPUT", flags->input, "DICOM directory or file, or .nii/.nii.gz/.nrrd/.mha (required)");
   sub->add_option("--out", flags->out, "output directory: new, empty, or one organsmith wrote before (its earlier outputs are replaced; other files are never touched) (required)");
   sub->add_option("--organ", flags->organs, "gallbladder or trachea; repeat for several organs (required)");
@@ -150,6 +150,7 @@ std::vector<Command> segmentation_commands(CLI::App& app) {
   sub->add_option("--seed-ijk", flags->seeds_ijk, "seed as voxel index I,J,K instead of --seed")->allow_extra_args(false);
   sub->add_option("--presets", flags->presets,
                   "TOML file overriding organ presets: any key of --print-presets, e.g. [gallbladder] alpha = 0.8");
+  sub->add_option("--name", flags->name, "case name shown in titles and the manifest (default: DIR's folder name)");
   sub->add_flag("--print-presets", flags->print_presets,
                 "print the embedded organ presets (HU windows, snake parameters, size limits, with sources) and exit");
   return {Command{sub, [flags] { return run_segment(*flags); }}};

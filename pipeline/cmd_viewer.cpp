@@ -7,6 +7,7 @@
 #include "physics/haptic_loop.h"
 #include "physics/models.h"
 #include "pipeline/commands.h"
+#include "pipeline/case_file.h"
 #include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/image_io.h"
@@ -55,6 +56,26 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
   if (!fs::is_directory(out, ec))  // load_output_scene names what it misses inside the directory
     throw InputError(ExitCode::input_not_found, "no such output directory", out,
                      "run `organsmith run --out " + out_arg + "` first");
+  // A run's directory: the run's snapshot stage itself, with the views and size given here.
+  if (flags.ct.empty() && flags.labels.empty() && flags.calibration_dirs.empty())
+    if (std::optional<CaseFile> c = case_of_run(out)) {
+      if (!views.empty()) {
+        for (const auto& v : views) parse_view_kind(v);  // an unknown view is a usage error
+        c->stages.snapshot.views = views;
+      }
+      if (!size.empty()) std::tie(c->stages.snapshot.width_px, c->stages.snapshot.height_px) = parse_size(size);
+      RunOptions ro;
+      ro.from = "snapshot";
+      TerminalProgress progress;
+      const RunSummary summary = run_case(*c, ro, progress);
+      progress.finish();
+      std::cout << "organsmith wrote " << summary.stages.back().outputs.size() << " snapshots ("
+                << c->stages.snapshot.width_px << "x" << c->stages.snapshot.height_px << ") into "
+                << (out / "snapshots").string() << ":\n";
+      for (const auto& o : summary.stages.back().outputs)
+        std::cout << "  " << fs::path(o["path"].get<std::string>()).filename().string() << "\n";
+      return 0;
+    }
   OutputDir dir(out, OutputDirOptions{.in_place = true, .command = "snapshot"});
   TerminalProgress progress;
   OutputScene os;

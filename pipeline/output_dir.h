@@ -71,6 +71,9 @@ class OutputDir {
   /// The stage records of this run so far, in order.
   const std::vector<nlohmann::json>& records() const { return records_; }
 
+  /// True when the directory was there before this command.
+  bool existed() const { return existed_; }
+
   /// Removes the directory again when this command created it and it is still empty (a command
   /// that failed before writing anything leaves no empty folder behind).
   void remove_if_unused() const;

@@ -102,7 +102,14 @@ class Runner {
         previous_(out_dir_.previous_manifest()) {}
 
   RunSummary run() {
-    run_stages();
+    try {
+      run_stages();
+    } catch (...) {
+      std::error_code ec;
+      // Everything in a directory this command created is its own.
+      if (options_.all_or_nothing && !out_dir_.existed()) fs::remove_all(out_, ec);
+      throw;
+    }
     RunSummary summary;
     summary.out_dir = out_;
     summary.stages = records_;
@@ -335,8 +342,8 @@ class Runner {
       if (p) {
         const Eigen::Vector3d ijk = grid.lps_mm_to_index(*p);
         if (!grid.contains(std::lround(ijk.x()), std::lround(ijk.y()), std::lround(ijk.z())))
-          throw CaseFileError("the seed of organ '" + o.name + "' lies outside the image", case_.source,
-                              "check the seed: LPS mm as shown by `organsmith info`");
+          throw InputError(ExitCode::bad_seed, "the seed of organ '" + o.name + "' lies outside the image",
+                           case_.source, "check the seed: LPS mm as shown by `organsmith info`");
         oj["seed_lps_mm"] = {p->x(), p->y(), p->z()};
         oj["seed_ijk"] = {ijk.x(), ijk.y(), ijk.z()};
       }
@@ -369,6 +376,20 @@ class Runner {
     rec.name = stage.name;
     rec.fingerprint = stage.fingerprint;
     const nlohmann::json* prev = previous_stage(stage.name);
+    started_ = started_ || options_.from.empty() || stage.name == options_.from;
+    if (!started_) {  // before --from: what an earlier command wrote, as it is
+      // A stage that never ran here is passed over; the stages from --from on say what they miss.
+      if (!prev || prev->value("status", "") == "interrupted" || !prev->contains("outputs")) return;
+      rec.skipped = true;
+      rec.fingerprint = prev->value("fingerprint", "");
+      rec.outputs = (*prev)["outputs"];
+      rec.seconds = prev->value("seconds", 0.0);
+      rec.peak_rss_mib = prev->value("peak_rss_mib", 0.0);
+      if (stage.name == "ingest" && previous_.contains("input")) input_json_ = previous_["input"];
+      out_dir_.keep(record_json(rec));
+      records_.push_back(rec);
+      return;
+    }
     if (!options_.force && prev && prev->value("fingerprint", "") == stage.fingerprint &&
         outputs_intact(prev->value("outputs", nlohmann::json()), out_)) {
       rec.skipped = true;
@@ -424,7 +445,8 @@ class Runner {
   std::string input_digest_;
   fs::path input_;
   std::optional<Volume> volume_;
-  bool done_ = false;  // set once the --until stage has run
+  bool done_ = false;     // set once the --until stage has run
+  bool started_ = false;  // set at the --from stage
   nlohmann::json input_json_ = nlohmann::json::object();
 };
 
@@ -453,11 +475,12 @@ const std::vector<std::string>& stage_names() {
 
 RunSummary run_case(const CaseFile& c, const RunOptions& options, Progress& progress) {
   const auto& names = stage_names();
-  if (!options.until.empty() && std::find(names.begin(), names.end(), options.until) == names.end()) {
-    std::string list;
-    for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
-    throw UsageError("unknown stage '" + options.until + "'", "stages: " + list);
-  }
+  for (const std::string* s : {&options.until, &options.from})
+    if (!s->empty() && std::find(names.begin(), names.end(), *s) == names.end()) {
+      std::string list;
+      for (const auto& n : names) list += (list.empty() ? "" : ", ") + n;
+      throw UsageError("unknown stage '" + *s + "'", "stages: " + list);
+    }
   return Runner(c, options, progress).run();
 }
 

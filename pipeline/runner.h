@@ -18,6 +18,13 @@ namespace organsmith {
 struct RunOptions {
   bool force = false;  ///< rerun every stage even when its fingerprint is unchanged
   std::string until;   ///< stop after this stage (empty = run all); see `stage_names()`
+  /// Start at this stage (empty = the first): the stages before it must have run into the output
+  /// directory already (their manifest records are taken as they are). This is how the
+  /// single-stage commands continue a run (`mesh DIR`, `guide DIR`, `snapshot DIR`).
+  std::string from;
+  /// A command that made the output directory removes it again when it fails, so that a failed
+  /// `segment` leaves nothing (`run` keeps the stages that succeeded, to resume from them).
+  bool all_or_nothing = false;
 };
 
 /// The stages of `organsmith run`, in order (the phantom stage only runs for input = "phantom").

@@ -3,6 +3,7 @@
 
 #include "core/errors.h"
 #include "core/sha256.h"
+#include "pipeline/image_io.h"
 #include "test_support.h"
 
 #include <gtest/gtest.h>
@@ -105,4 +106,24 @@ TEST(RunOptions, StageOptionsTakeEffectAndAChangeRerunsOnlyWhatFollowsIt) {
   EXPECT_NE(log.find("line 15"), std::string::npos) << log;
   EXPECT_NE(log.find("case.toml"), std::string::npos) << log;
   EXPECT_FALSE(fs::exists(tmp / "other"));
+}
+
+// A label map meshing cannot use is a typed error with its documented code, never exit 1.
+TEST(RunOptions, MeshingInputProblemsExitWith60AndWriteNothing) {
+  ScratchDir tmp("mesh-errors");
+  organsmith::LabelMap empty;
+  empty.grid.size_vox = {32, 32, 8};
+  empty.grid.spacing_mm = {1.0, 1.0, 2.0};
+  empty.labels.assign(std::size_t(empty.grid.voxel_count()), 0);
+  organsmith::write_label_map(empty, tmp / "empty.nii.gz");
+  organsmith::LabelMap speck = empty;  // one voxel of the gallbladder: too small for a surface
+  speck.labels[speck.grid.offset(16, 16, 4)] = 1;
+  organsmith::write_label_map(speck, tmp / "speck.nii.gz");
+  std::string log;
+  for (const char* f : {"empty.nii.gz", "speck.nii.gz"}) {
+    EXPECT_EQ(run_cli("mesh " + q(tmp / f) + " --out " + q(tmp / "out"), &log), int(organsmith::ExitCode::mesh_input))
+        << f << "\n" << log;
+    EXPECT_EQ(log.find("internal error"), std::string::npos) << log;
+    EXPECT_FALSE(fs::exists(tmp / "out")) << f;
+  }
 }

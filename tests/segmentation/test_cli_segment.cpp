@@ -35,8 +35,9 @@ TEST(SegmentCli, BothOrgansOnThePhantomWriteLabelsContoursAndOverlays) {
   const auto r = run_cli("segment " + (tmp / "ph/dicom").string() + " --out " + out.string() +
                          " --organ gallbladder " + seed_arg(seeds, "gallbladder") + " --organ trachea");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  for (const char* f : {"labels.nii.gz", "contours_gallbladder.json", "contours_trachea.json", "overlay_gallbladder.png",
-                        "overlay_trachea.png", "segmentation.json"})
+  // The files of the run's ingest and segment stages (the command is those stages of `run`).
+  for (const char* f : {"labels.nii.gz", "contours_gallbladder.json", "contours_trachea.json",
+                        "overlays/overlay_gallbladder.png", "overlays/overlay_trachea.png", "ingest.json", "manifest.json"})
     EXPECT_TRUE(fs::exists(out / f)) << f;
   const LabelMap labels = read_label_map(out / "labels.nii.gz");
   const LabelMap truth = read_label_map(tmp / "ph/ground_truth.nii.gz");
