@@ -13,6 +13,7 @@
 #include "pipeline/commands.h"
 #include "pipeline/case_file.h"
 #include "pipeline/organ_registry.h"
+#include "pipeline/output_layout.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/output_scene.h"
 #include "pipeline/guide_stage.h"
@@ -43,10 +44,11 @@ void require_out_dir(const fs::path& out) {
 
 /// The label map of a run: the segmentation, else the phantom's ground truth.
 LabelMap run_labels(const fs::path& out) {
-  fs::path f = out / "labels.nii.gz";
-  if (!fs::exists(f) && fs::exists(out / "phantom" / "ground_truth.nii.gz")) f = out / "phantom" / "ground_truth.nii.gz";
+  const OutputLayout layout{out};
+  fs::path f = layout.labels();
+  if (!fs::exists(f) && fs::exists(layout.phantom_truth())) f = layout.phantom_truth();
   if (!fs::exists(f))
-    throw InputError(ExitCode::input_not_found, "no label map in the output directory", out / "labels.nii.gz",
+    throw InputError(ExitCode::input_not_found, "no label map in the output directory", layout.labels(),
                      "run `organsmith run` into this directory first");
   return read_label_map(f);
 }
@@ -101,10 +103,10 @@ int run_guide(const GuideFlags& f) {
   // Every file is staged, then moved into OUT_DIR/paths: a failure leaves nothing behind. Each
   // named path is its own stage, so that adding one keeps the others.
   OutputDir dir(out, OutputDirOptions{.in_place = true, .command = "guide"});
-  const fs::path dest = dir.path() / "paths";
+  const fs::path dest = OutputLayout{dir.path()}.paths_dir();
   std::vector<std::string> written;
   dir.commit(f.path.empty() ? "guide" : "guide-" + fs::path(f.path).stem().string(), [&](const fs::path& staging) {
-    const fs::path paths = staging / "paths";
+    const fs::path paths = OutputLayout{staging}.paths_dir();
     fs::create_directories(paths);
     if (user) {
       user->name = fs::path(f.path).stem().string();
@@ -113,7 +115,9 @@ int run_guide(const GuideFlags& f) {
       write_text_atomic(paths / (user->name + ".vtp"), path_vtp(*user));
       written = {user->name + ".json", user->name + ".vtp"};
     } else {
-      written = write_guidance_paths(out, paths, options, registry_of_output(out));
+      const std::optional<CaseFile> run = case_of_run(out);
+      const GuideFiles files = read_guide_inputs(out, run && run->stages.mesh.ras);
+      written = write_guidance_paths(files.inputs(), paths, options, run ? run->registry : registry_of_output(out));
     }
   });
   for (const auto& w : written) std::cout << "wrote " << (dest / w).string() << "\n";
@@ -137,7 +141,7 @@ StressTable region_table(const fs::path& out, const OrganInfo& organ, const Orga
   const RegionLaw law = region_law(out, organ.haptic_region, registry);
   if (!law.from_output)
     spdlog::warn("haptics: {} not in {}; using the built-in preset {}", organ.haptic_region,
-                 (out / "materials.json").string(), law.preset_id);
+                 OutputLayout{out}.materials().string(), law.preset_id);
   return StressTable::from_material(law.material, law.options, organ.haptic_max_strain);
 }
 
@@ -165,7 +169,7 @@ int run_haptics(HapticsFlags f) {
   // The path.
   Polyline path;
   if (is_builtin(f.path)) {
-    const fs::path pf = out / "paths" / (f.path + ".json");
+    const fs::path pf = OutputLayout{out}.path(f.path, "json");
     if (!fs::exists(pf))
       throw InputError(ExitCode::input_not_found, "no guidance path " + f.path, pf,
                        "run `organsmith guide " + out.string() + "` (or `organsmith run`) first");
@@ -185,7 +189,7 @@ int run_haptics(HapticsFlags f) {
   const OrganRegistry registry = registry_of_output(out);
   for (const OrganInfo& o : registry.organs) {
     if (o.haptic_surface.empty() || labels.count(o.label) == 0) continue;
-    const fs::path sf = out / "meshes" / o.name / (o.haptic_surface + ".stl");
+    const fs::path sf = OutputLayout{out}.surface(o.name, o.haptic_surface, "stl");
     if (!fs::exists(sf))
       throw InputError(ExitCode::input_not_found, "missing organ surface " + o.haptic_surface + ".stl", sf,
                        "run the mesh stage (`organsmith run`) first");

@@ -9,6 +9,7 @@
 #include "pipeline/commands.h"
 #include "pipeline/case_file.h"
 #include "pipeline/organ_registry.h"
+#include "pipeline/output_layout.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
@@ -71,7 +72,7 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
       progress.finish();
       std::cout << "organsmith wrote " << summary.stages.back().outputs.size() << " snapshots ("
                 << c->stages.snapshot.width_px << "x" << c->stages.snapshot.height_px << ") into "
-                << (out / "snapshots").string() << ":\n";
+                << OutputLayout{out}.snapshots_dir().string() << ":\n";
       for (const auto& o : summary.stages.back().outputs)
         std::cout << "  " << fs::path(o["path"].get<std::string>()).filename().string() << "\n";
       return 0;
@@ -85,11 +86,11 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
   if (names.empty())
     throw InputError(ExitCode::input_not_found, "nothing to draw: no CT, label map or meshes found", out,
                      "run `organsmith run --out " + out_arg + "` first");
-  const fs::path final_dir = out / "snapshots";
+  const fs::path final_dir = OutputLayout{out}.snapshots_dir();
   std::vector<fs::path> written;
   dir.commit("snapshot", [&](const fs::path& staging) {
-    fs::create_directories(staging / "snapshots");
-    written = render_snapshots(os.scene, options, staging / "snapshots", progress);
+    fs::create_directories(OutputLayout{staging}.snapshots_dir());
+    written = render_snapshots(os.scene, options, OutputLayout{staging}.snapshots_dir(), progress);
   });
   progress.finish();
   std::cout << "organsmith wrote " << written.size() << " snapshots (" << options.width_px << "x" << options.height_px
@@ -144,7 +145,7 @@ int cmd_preview(const PreviewFlags& f) {
     if (!chosen) {
       std::string names;
       for (const auto& p : os.scene.paths) names += (names.empty() ? "" : ", ") + p.line.name;
-      throw UsageError("no guidance path '" + f.path + "' in " + (out / "paths").string(),
+      throw UsageError("no guidance path '" + f.path + "' in " + OutputLayout{out}.paths_dir().string(),
                        names.empty() ? "run `organsmith guide " + f.out + "` first" : "paths there: " + names);
     }
   } else {

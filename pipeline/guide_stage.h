@@ -1,11 +1,16 @@
 #pragma once
-// The guide stage (guidance paths from a run's output directory), shared by `organsmith run`
-// and `organsmith guide`. Defined in pipeline/runner.cpp.
+// The guide stage (guidance paths), shared by `organsmith run` (inputs in memory) and
+// `organsmith guide` (inputs read from an output directory).
 
 #include "physics/paths.h"
 #include "pipeline/organ_registry.h"
 
+#include "core/geometry.h"
+#include "core/volume.h"
+
 #include <filesystem>
+#include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -23,13 +28,30 @@ struct GuideStageOptions {
 /// Names of the built-in paths, in the order they are made.
 const std::vector<std::string>& builtin_path_names();
 
-/// Reads OUT_DIR/labels.nii.gz (else phantom/ground_truth.nii.gz), the organ surfaces in
-/// OUT_DIR/meshes/ and, for the liver bed, the liver label (of the label map, else of
-/// phantom/ground_truth.nii.gz on the same grid); writes <name>.json and <name>.vtp per path into
-/// `dest_dir` (created). Returns the file names written. Throws InputError (exit code 3) when
-/// the label map or a needed organ surface is missing.
+/// What the guide stage reads: the label map, the phantom's ground truth (for the liver bed when
+/// the label map has no liver; may be null) and the organ surfaces by (organ, surface name), in
+/// LPS mm. `surface` throws InputError when a surface is missing.
+struct GuideInputs {
+  const LabelMap* labels = nullptr;
+  const LabelMap* truth = nullptr;
+  std::function<SurfaceMesh(const std::string& organ, const std::string& surface)> surface;
+};
+
+/// GuideInputs read from an output directory (for `guide` on a directory and for resuming): the
+/// segmentation, else the phantom's ground truth; surfaces from the exact .vtp, else the .stl;
+/// `ras`: the meshes were written in RAS (converted back). Owns what it read.
+struct GuideFiles {
+  LabelMap labels;
+  std::optional<LabelMap> truth;
+  std::function<SurfaceMesh(const std::string&, const std::string&)> surface;
+  GuideInputs inputs() const { return {&labels, truth ? &*truth : nullptr, surface}; }
+};
+GuideFiles read_guide_inputs(const std::filesystem::path& out_dir, bool ras = false);
+
+/// Makes the built-in paths `options` asks for (all whose organ the label map holds by default),
+/// writes <name>.json and <name>.vtp per path into `dest_dir` (created) and returns the file names.
 /// The trachea's and the liver's labels and the organs' surface names come from `registry`.
-std::vector<std::string> write_guidance_paths(const std::filesystem::path& out_dir, const std::filesystem::path& dest_dir,
+std::vector<std::string> write_guidance_paths(const GuideInputs& inputs, const std::filesystem::path& dest_dir,
                                               const GuideStageOptions& options, const OrganRegistry& registry);
 
 }  // namespace organsmith

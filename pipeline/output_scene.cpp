@@ -7,6 +7,7 @@
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
 #include "pipeline/organ_registry.h"
+#include "pipeline/output_layout.h"
 #include "viewer/label_surface.h"
 #include "viewer/mesh_files.h"
 #include "viewer/snapshot.h"
@@ -17,6 +18,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <functional>
 #include <map>
 #include <set>
 #include <sstream>
@@ -248,7 +250,7 @@ std::optional<Plot> monte_carlo_plot(const fs::path& dir, const std::string& ste
 /// them; and the CDFs of that Monte Carlo at a few stretches.
 std::vector<Plot> material_plots(const fs::path& out, const OrganRegistry& registry) {
   std::vector<Plot> plots;
-  const nlohmann::json mj = read_json_or_null(out / "materials.json");
+  const nlohmann::json mj = read_json_or_null(OutputLayout{out}.materials());
   if (!mj.is_object() || !mj.contains("regions") || !mj["regions"].is_object()) return plots;
   const physics::MaterialLibrary lib = physics::builtin_material_library();
   Plot laws;
@@ -373,7 +375,7 @@ std::vector<Plot> material_plots(const fs::path& out, const OrganRegistry& regis
 
 RegionLaw region_law(const fs::path& out, const std::string& region, const OrganRegistry& registry) {
   RegionLaw law;
-  const fs::path mf = out / "materials.json";
+  const fs::path mf = OutputLayout{out}.materials();
   if (fs::exists(mf)) {
     std::ifstream in(mf);
     nlohmann::json j;
@@ -421,7 +423,7 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
     throw InputError(ExitCode::input_not_found, "no such output directory", out,
                      "give the directory `organsmith run --out` wrote (default: out)");
   SnapshotScene& scene = os.scene;
-  const nlohmann::json manifest = read_json_or_null(out / "manifest.json");
+  const nlohmann::json manifest = read_json_or_null(OutputLayout{out}.manifest());
   scene.case_name = out.filename().string();
   if (manifest.is_object() && manifest.contains("case") && manifest["case"].is_object())
     scene.case_name = manifest["case"].value("name", scene.case_name);
@@ -437,10 +439,13 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
   for (const auto& n : organ_names)
     if (const OrganInfo* o = registry.find(n)) scene.organs.push_back({n, o->label, rgb(*o)});
 
-  // CT: as given, else the phantom the run synthesised, else the case's input.
-  if (flags.need_ct) {
+  // CT: this run's, else as given, else the phantom the run synthesised, else the case's input.
+  const OutputLayout layout{out};
+  if (flags.need_ct && flags.ct_volume) {
+    scene.ct = flags.ct_volume;
+  } else if (flags.need_ct) {
     fs::path ct = flags.ct;
-    if (ct.empty() && fs::exists(out / "phantom" / "dicom")) ct = out / "phantom" / "dicom";
+    if (ct.empty() && fs::exists(layout.phantom_dicom())) ct = layout.phantom_dicom();
     if (ct.empty() && manifest.is_object() && manifest.contains("case") && manifest["case"].contains("input")) {
       const auto& in = manifest["case"]["input"];
       if (in.is_string() && fs::exists(in.get<std::string>())) ct = in.get<std::string>();
@@ -454,20 +459,26 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
     }
   }
 
-  // Labels: the segmentation, else the phantom's ground truth.
+  // Labels: this run's segmentation, else as given, else the file, else the phantom's ground truth.
   fs::path labels = flags.labels;
   std::string source = "label map " + fs::path(flags.labels).filename().string();
-  if (labels.empty() && fs::exists(out / "labels.nii.gz")) labels = out / "labels.nii.gz", source = "segmentation";
-  if (labels.empty() && fs::exists(out / "phantom" / "ground_truth.nii.gz")) {
-    labels = out / "phantom" / "ground_truth.nii.gz";
+  if (labels.empty() && (flags.label_map || fs::exists(layout.labels()))) labels = layout.labels(), source = "segmentation";
+  if (labels.empty() && fs::exists(layout.phantom_truth())) {
+    labels = layout.phantom_truth();
     source = "phantom ground truth";
     os.missing.push_back("the segmentation (labels.nii.gz): outlines show the phantom's ground truth instead");
   }
   if (!labels.empty()) {
-    os.labels = read_label_map(labels);
-    scene.labels = &*os.labels;
+    const LabelMap* lm = nullptr;
+    if (flags.label_map && flags.labels.empty()) {
+      lm = flags.label_map;
+    } else {
+      os.labels = read_label_map(labels);
+      lm = &*os.labels;
+    }
+    scene.labels = lm;
     scene.labels_source = source;
-    if (os.ct && !os.labels->grid.same_geometry(os.ct->grid)) {
+    if (scene.ct && !lm->grid.same_geometry(scene.ct->grid)) {
       spdlog::warn("{} is not on the CT's grid: slices are drawn without outlines", labels.string());
       scene.labels = nullptr;
     }
@@ -477,7 +488,7 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
 
   // Contours of the segmentation stage.
   for (const auto& o : scene.organs)
-    if (const auto p = out / ("contours_" + o.name + ".json"); fs::exists(p))
+    if (const auto p = layout.contours(o.name); fs::exists(p))
       if (auto stack = read_contours(p, o.name)) scene.contours.push_back(std::move(*stack));
 
   // Meshes of the mesh stage: meshes/<organ>/<surface>.vtp and meshes/<organ>/<organ>.vtu, by the
@@ -488,15 +499,44 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
     bool surface;
   };
   std::vector<MeshFile> files;
-  for (const auto& so : scene.organs) {
-    const OrganInfo& info = registry.at(so.name);
-    const fs::path dir = out / "meshes" / so.name;
-    for (const auto& surface : info.surfaces())
-      if (fs::is_regular_file(dir / (surface + ".vtp"), ec)) files.push_back({dir / (surface + ".vtp"), &info, true});
-    if (fs::is_regular_file(dir / (so.name + ".vtu"), ec)) files.push_back({dir / (so.name + ".vtu"), &info, false});
+  std::map<std::string, std::vector<SceneSurface*>> by_organ;
+  if (flags.meshes) {
+    // This run's meshes, in the order the files would be read (by path): organs in name order,
+    // then the organ's surfaces by name, then its tets.
+    std::vector<std::pair<fs::path, std::function<void()>>> items;
+    for (const auto& so : scene.organs) {
+      const OrganInfo& info = registry.at(so.name);
+      for (const OrganMesh& om : flags.meshes->organs) {
+        if (om.spec.name != so.name) continue;
+        for (const NamedSurface& ns : om.surfaces) {
+          const auto& names = info.surfaces();
+          if (std::find(names.begin(), names.end(), ns.name) == names.end() || ns.mesh.triangles.empty()) continue;
+          items.push_back({layout.surface(so.name, ns.name, "vtp"), [&scene, &ns, &info, rgb] {
+                             SceneSurface s;
+                             s.name = ns.name;
+                             s.organ = info.name;
+                             s.colour = rgb(info);
+                             s.mesh = ns.mesh;
+                             s.source = "mesh stage";
+                             scene.surfaces.push_back(std::move(s));
+                           }});
+        }
+        if (!om.volume.tets.empty())
+          items.push_back({layout.volume(so.name, "vtu"), [&scene, &om] { scene.tet_meshes.push_back({om.spec.name, om.volume}); }});
+      }
+    }
+    std::stable_sort(items.begin(), items.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+    for (auto& [_, add] : items) add();
+  } else {
+    for (const auto& so : scene.organs) {
+      const OrganInfo& info = registry.at(so.name);
+      for (const auto& surface : info.surfaces())
+        if (const fs::path f = layout.surface(so.name, surface, "vtp"); fs::is_regular_file(f, ec))
+          files.push_back({f, &info, true});
+      if (const fs::path f = layout.volume(so.name, "vtu"); fs::is_regular_file(f, ec)) files.push_back({f, &info, false});
+    }
   }
   std::sort(files.begin(), files.end(), [](const MeshFile& a, const MeshFile& b) { return a.path < b.path; });
-  std::map<std::string, std::vector<SceneSurface*>> by_organ;
   for (const auto& f : files) {
     MeshFileContents m;
     try {
@@ -518,14 +558,10 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
   }
   // An organ drawn with several surfaces: its wall (the registry says which) is translucent.
   for (auto& s : scene.surfaces) by_organ[s.organ].push_back(&s);
-  // A solid organ the registry draws translucent (a large organ modelled for context, e.g. the
-  // liver around the gallbladder) keeps its registry opacity.
   for (auto& [organ, list] : by_organ) {
     const OrganInfo& info = registry.at(organ);
-    for (auto* s : list) {
+    for (auto* s : list)
       if (list.size() > 1 && s->name == info.wall_surface()) s->opacity = 0.35;
-      if (info.mesh == OrganMeshModel::solid) s->opacity = info.opacity;
-    }
   }
 
   // Organs the meshing stage has not (yet) produced: a label-map isosurface, said so in the title.
@@ -557,8 +593,8 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
     std::optional<LabelMap> truth;
     const bool labels_have_context =
         std::any_of(context.begin(), context.end(), [&](const OrganInfo* o) { return scene.labels->count(o->label) > 0; });
-    if (flags.context_step_vox > 0 && !labels_have_context && fs::exists(out / "phantom" / "ground_truth.nii.gz")) {
-      truth = read_label_map(out / "phantom" / "ground_truth.nii.gz");
+    if (flags.context_step_vox > 0 && !labels_have_context && fs::exists(layout.phantom_truth())) {
+      truth = read_label_map(layout.phantom_truth());
       context_labels = &*truth;
     }
     for (const OrganInfo* o : context) {
@@ -580,7 +616,7 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
 
   // Guidance paths of the guide stage (OUT/paths/<name>.json), in name order.
   std::vector<fs::path> path_files;
-  for (auto it = fs::directory_iterator(out / "paths", ec); !ec && it != fs::directory_iterator(); ++it)
+  for (auto it = fs::directory_iterator(layout.paths_dir(), ec); !ec && it != fs::directory_iterator(); ++it)
     if (it->is_regular_file() && it->path().extension() == ".json") path_files.push_back(it->path());
   ec.clear();
   std::sort(path_files.begin(), path_files.end());

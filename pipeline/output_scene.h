@@ -6,6 +6,7 @@
 #include "core/material.h"
 #include "core/progress.h"
 #include "core/volume.h"
+#include "meshing/mesh.h"
 #include "physics/models.h"
 #include "pipeline/organ_registry.h"
 #include "viewer/scene.h"
@@ -42,6 +43,11 @@ struct LoadFlags {
   /// The organ registry of the run; null = the one the directory's manifest names, else the
   /// embedded one.
   const OrganRegistry* registry = nullptr;
+  /// What a run holds in memory already, used instead of reading the files (null = read them).
+  /// They must outlive the OutputScene.
+  const Volume* ct_volume = nullptr;
+  const LabelMap* label_map = nullptr;
+  const OrganMeshes* meshes = nullptr;  ///< the mesh stage's result, LPS mm
 };
 
 /// The calibrated law of an organ region ("gallbladder_body", "trachea_wall", …): from

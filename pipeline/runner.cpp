@@ -15,6 +15,7 @@
 #include "physics/contact.h"
 #include "physics/presets.h"
 #include "pipeline/output_dir.h"
+#include "pipeline/output_layout.h"
 #include "pipeline/output_scene.h"
 #include "viewer/snapshot.h"
 #include "segmentation/segment.h"
@@ -99,6 +100,7 @@ class Runner {
                                                                             : std::vector<fs::path>{c.input},
                                              .command = "run"}),
         out_(out_dir_.path()),
+        layout_{out_},
         previous_(out_dir_.previous_manifest()) {}
 
   RunSummary run() {
@@ -125,10 +127,11 @@ class Runner {
       const nlohmann::json opts = to_json(case_)["phantom"];
       execute({"phantom", fingerprint("phantom", opts.dump()), [&](const fs::path& staging) {
                  const Phantom ph = synthesize_phantom(case_.phantom, progress_);
-                 fs::create_directories(staging / "phantom");
-                 write_phantom_files(ph, case_.phantom, staging / "phantom", progress_);
+                 const OutputLayout staged{staging};
+                 fs::create_directories(staged.phantom_dir());
+                 write_phantom_files(ph, case_.phantom, staged.phantom_dir(), progress_);
                }});
-      input = out_ / "phantom" / "dicom";
+      input = layout_.phantom_dicom();
     }
     input_ = input;
     const nlohmann::json ingest_opts = to_json(case_)["ingest"];
@@ -145,15 +148,12 @@ class Runner {
                [&](const fs::path& staging) { write_meshes(staging); }});
       execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
                [&](const fs::path& staging) {
-                 write_text_atomic(staging / "materials.json", materials_json().dump(2) + "\n");
+                 write_text_atomic(OutputLayout{staging}.materials(), materials_json().dump(2) + "\n");
                }});
       // guide: guidance paths (trachea centreline and incision, gallbladder dissection) in paths/.
       execute({"guide", fingerprint("guide", stage_json(case_, "guide").dump() + outputs_digest("phantom") +
                                                  outputs_digest("segment") + outputs_digest("mesh")),
-               [&](const fs::path& staging) {
-                 for (const auto& f : write_guidance_paths(out_, staging / "paths", case_.stages.guide, case_.registry))
-                   spdlog::info("guide: paths/{}", f);
-               }});
+               [&](const fs::path& staging) { write_paths(staging); }});
     }
     const nlohmann::json snap_opts = stage_json(case_, "snapshot");
     execute({"snapshot",
@@ -166,7 +166,7 @@ class Runner {
   /// mesh builds surfaces, organ walls and tetrahedra from the segmentation and exports them
   /// into meshes/<organ>/ with the calibrated materials in the solver files.
   void write_meshes(const fs::path& staging) {
-    const LabelMap labels = read_label_map(out_ / "labels.nii.gz");
+    const LabelMap& labels = segmentation();
     const MeshStageOptions& mo = case_.stages.mesh;
     MeshOptions options;
     options.organs.clear();
@@ -175,7 +175,7 @@ class Runner {
     options.tetrahedra = mo.tetrahedra;
     // "report" (the default): a failing figure is a warning and quality.json records it.
     options.enforce_quality = mo.quality_gate == "enforce";
-    const OrganMeshes meshes = mesh_organs(labels, options, progress_);
+    OrganMeshes meshes = mesh_organs(labels, options, progress_);
     for (const auto& w : meshes.warnings) spdlog::warn("mesh: {}", w);
     for (const auto& organ : meshes.organs) {
       for (const auto& w : organ.warnings) spdlog::warn("mesh: {}", w);  // each names its organ
@@ -189,9 +189,45 @@ class Runner {
     ex.ras = mo.ras;
     ex.materials = region_materials(case_.registry);
     std::vector<std::string> warnings;
-    fs::create_directories(staging / "meshes");
-    export_meshes(meshes, staging / "meshes", ex, &warnings);
+    const OutputLayout staged{staging};
+    fs::create_directories(staged.meshes_dir());
+    export_meshes(meshes, staged.meshes_dir(), ex, &warnings);
     for (const auto& w : warnings) spdlog::warn("mesh: {}", w);
+    meshes_ = std::move(meshes);
+  }
+
+  /// The segmentation: this run's, else read from labels.nii.gz (its reader).
+  const LabelMap& segmentation() {
+    if (!labels_) labels_ = read_label_map(layout_.labels());
+    return *labels_;
+  }
+
+  /// guide: the guidance paths from this run's label map and surfaces (in memory), else from the
+  /// files of the stages it reuses.
+  void write_paths(const fs::path& staging) {
+    std::optional<GuideFiles> files;
+    GuideInputs in;
+    if (labels_ && meshes_) {
+      in.labels = &*labels_;
+      in.surface = [this](const std::string& organ, const std::string& name) {
+        for (const auto& o : meshes_->organs)
+          if (o.spec.name == organ)
+            for (const auto& s : o.surfaces)
+              if (s.name == name) return s.mesh;
+        throw InputError(ExitCode::input_not_found, "the mesh stage made no surface " + name, layout_.organ_dir(organ),
+                         "check the mesh stage's warnings");
+      };
+      if (fs::exists(layout_.phantom_truth())) {
+        files.emplace();
+        files->labels = read_label_map(layout_.phantom_truth());
+        in.truth = &files->labels;
+      }
+    } else {
+      files = read_guide_inputs(out_, case_.stages.mesh.ras);
+      in = files->inputs();
+    }
+    for (const auto& f : write_guidance_paths(in, OutputLayout{staging}.paths_dir(), case_.stages.guide, case_.registry))
+      spdlog::info("guide: paths/{}", f);
   }
 
   /// snapshot renders the review PNGs of everything the earlier stages left in the output.
@@ -201,16 +237,20 @@ class Runner {
     out_dir_.write_manifest(manifest_header());
     LoadFlags flags;
     flags.ct = input_.string();
+    flags.registry = &case_.registry;
+    if (volume_) flags.ct_volume = &*volume_;  // this run's, in memory (else read again)
+    if (labels_) flags.label_map = &*labels_;
+    if (meshes_ && !case_.stages.mesh.ras) flags.meshes = &*meshes_;
     OutputScene os;
     load_output_scene(out_, flags, os, progress_);
     for (const auto& m : os.missing) spdlog::info("snapshot: not found: {}", m);
-    fs::create_directories(staging / "snapshots");
+    fs::create_directories(OutputLayout{staging}.snapshots_dir());
     SnapshotOptions so;
     so.width_px = case_.stages.snapshot.width_px;
     so.height_px = case_.stages.snapshot.height_px;
     so.views.clear();
     for (const auto& v : case_.stages.snapshot.views) so.views.push_back(parse_view_kind(v));
-    const auto written = render_snapshots(os.scene, so, staging / "snapshots", progress_);
+    const auto written = render_snapshots(os.scene, so, OutputLayout{staging}.snapshots_dir(), progress_);
     spdlog::info("snapshot: {} views", written.size());
   }
 
@@ -246,7 +286,7 @@ class Runner {
   /// organs with a segmentation preset found by the GVF snakes, the others taken from their label
   /// maps.
   void write_segmentation(const fs::path& staging) {
-    std::ifstream in(out_ / "ingest.json");
+    std::ifstream in(layout_.ingest());
     const nlohmann::json ingest_json = nlohmann::json::parse(in);
     std::vector<OrganRequest> requests;
     for (const auto& o : ingest_json.at("organs")) {
@@ -267,7 +307,7 @@ class Runner {
     SegmentationResult result = segment_organs(volume(), requests, options, progress_);
     for (const auto& spec : case_.organs) {
       if (spec.label_map.empty()) continue;
-      const fs::path file = spec.label_map == "phantom" ? out_ / "phantom" / "ground_truth.nii.gz" : spec.label_map;
+      const fs::path file = spec.label_map == "phantom" ? layout_.phantom_truth() : spec.label_map;
       const OrganInfo& info = case_.registry.at(spec.name);
       const double ml = merge_organ_from_label_map(result.labels, read_label_map(file), info.label);
       if (ml <= 0)
@@ -276,15 +316,17 @@ class Runner {
                          file, "check the label map and the organ's label in the organ registry");
       spdlog::info("segment: {} {:.1f} ml from the label map {}", spec.name, ml, file.filename().string());
     }
-    write_label_map(result.labels, staging / "labels.nii.gz");
+    const OutputLayout staged{staging};
+    write_label_map(result.labels, staged.labels());
     for (const auto& organ : result.organs) {
-      write_text_atomic(staging / ("contours_" + organ.organ + ".json"), contours_json(organ));
+      write_text_atomic(staged.contours(organ.organ), contours_json(organ));
       spdlog::info("segment: {} {:.1f} ml on slices {}–{}", organ.organ, organ.volume_ml, organ.first_slice,
                    organ.last_slice);
       for (const auto& note : organ.notes) spdlog::info("segment: {}: {}", organ.organ, note);
     }
-    fs::create_directories(staging / "overlays");
-    write_overlays(volume(), result, staging / "overlays");
+    fs::create_directories(staged.overlays_dir());
+    write_overlays(volume(), result, staged.overlays_dir());
+    labels_ = std::move(result.labels);
   }
 
   const OrganSpec* case_organ(const std::string& name) const {
@@ -322,13 +364,13 @@ class Runner {
     j["warnings"] = r.report.warnings;
     j["organs"] = resolve_seeds(r.volume.grid);
     input_json_ = {{"format", j["format"]}, {"digest_sha256", input_digest_}, {"grid", j["grid"]}};
-    write_text_atomic(staging / "ingest.json", j.dump(2) + "\n");
+    write_text_atomic(OutputLayout{staging}.ingest(), j.dump(2) + "\n");
     volume_ = std::move(r.volume);
   }
 
   nlohmann::json resolve_seeds(const ImageGrid& grid) {
     std::map<std::string, Eigen::Vector3d> phantom_seeds;
-    if (case_.synthesize_phantom) phantom_seeds = read_seeds(out_ / "phantom" / "seeds.json");
+    if (case_.synthesize_phantom) phantom_seeds = read_seeds(layout_.phantom_seeds());
     nlohmann::json organs = nlohmann::json::array();
     for (const auto& o : case_.organs) {
       nlohmann::json oj = {{"name", o.name}};
@@ -440,11 +482,16 @@ class Runner {
   Progress& progress_;
   OutputDir out_dir_;
   fs::path out_;
+  OutputLayout layout_;  // paths in the output directory (and, with root = staging, in a stage's staging folder)
   nlohmann::json previous_;
   std::vector<StageRecord> records_;
   std::string input_digest_;
   fs::path input_;
+  // What the stages of this run made, handed on in memory; a stage reused from an earlier run
+  // leaves them empty and the next stage reads its files instead (their readers).
   std::optional<Volume> volume_;
+  std::optional<LabelMap> labels_;
+  std::optional<OrganMeshes> meshes_;
   bool done_ = false;     // set once the --until stage has run
   bool started_ = false;  // set at the --from stage
   nlohmann::json input_json_ = nlohmann::json::object();
@@ -482,96 +529,6 @@ RunSummary run_case(const CaseFile& c, const RunOptions& options, Progress& prog
       throw UsageError("unknown stage '" + *s + "'", "stages: " + list);
     }
   return Runner(c, options, progress).run();
-}
-
-// ---- guide stage (guidance paths; also `organsmith guide`) -----------------------------------------
-
-const std::vector<std::string>& builtin_path_names() {
-  static const std::vector<std::string> names = {"trachea_centerline", "trachea_incision", "gallbladder_dissection"};
-  return names;
-}
-
-std::vector<std::string> write_guidance_paths(const fs::path& out_dir, const fs::path& dest_dir,
-                                              const GuideStageOptions& options, const OrganRegistry& registry) {
-  for (const auto& n : options.only)
-    if (std::find(builtin_path_names().begin(), builtin_path_names().end(), n) == builtin_path_names().end())
-      throw UsageError("unknown path '" + n + "'", "paths: trachea_centerline, trachea_incision, gallbladder_dissection");
-  const fs::path truth_file = out_dir / "phantom" / "ground_truth.nii.gz";
-  fs::path labels_file = out_dir / "labels.nii.gz";
-  if (!fs::exists(labels_file) && fs::exists(truth_file)) labels_file = truth_file;
-  if (!fs::exists(labels_file))
-    throw InputError(ExitCode::input_not_found, "no label map in the output directory", out_dir / "labels.nii.gz",
-                     "run `organsmith run` (or `organsmith segment`) into this directory first");
-  const LabelMap labels = read_label_map(labels_file);
-  auto wanted = [&](const std::string& n, std::uint8_t label) {
-    if (!options.only.empty()) return std::find(options.only.begin(), options.only.end(), n) != options.only.end();
-    return labels.count(label) > 0;
-  };
-  auto surface = [&](const std::string& organ, const std::string& name) {
-    const fs::path f = out_dir / "meshes" / organ / (name + ".stl");
-    if (!fs::exists(f))
-      throw InputError(ExitCode::input_not_found, "missing organ surface " + name + ".stl", f,
-                       "run the mesh stage (`organsmith run`, or `organsmith mesh … --out " + (out_dir / "meshes").string() +
-                           "`) first");
-    return read_stl(f);
-  };
-  fs::create_directories(dest_dir);
-  std::vector<std::string> written;
-  auto emit = [&](const Polyline& line, const std::vector<std::pair<std::string, double>>& props) {
-    write_text_atomic(dest_dir / (line.name + ".json"), physics::path_json(line, props));
-    write_text_atomic(dest_dir / (line.name + ".vtp"), physics::path_vtp(line));
-    written.push_back(line.name + ".json");
-    written.push_back(line.name + ".vtp");
-  };
-  // The paths belong to two organs of the registry; an organ a registry lacks has no paths.
-  const OrganInfo* trachea = registry.find("trachea");
-  const OrganInfo* gallbladder = registry.find("gallbladder");
-  const OrganInfo* liver_info = registry.find("liver");
-  const bool want_centerline = trachea && wanted("trachea_centerline", trachea->label);
-  const bool want_incision = trachea && wanted("trachea_incision", trachea->label);
-  if (want_centerline || want_incision) {
-    physics::CenterlineOptions co = options.centerline;
-    co.label = trachea->label;
-    const physics::Centerline cl = physics::trachea_centerline(labels, co);
-    if (want_centerline)
-      emit(cl.line, {{"cranial_extension_mm", cl.end_extension_mm[0]},
-                     {"caudal_extension_mm", cl.end_extension_mm[1]},
-                     {"spacing_mm", options.centerline.spacing_mm}});
-    if (want_incision) {
-      const physics::SurfaceIndex wall({surface(trachea->name, trachea->wall_surface())});
-      const physics::IncisionPath inc = physics::trachea_incision_path(cl, wall, options.incision);
-      emit(inc.line, {{"length_mm", inc.length_mm},
-                      {"first_ring", double(inc.first_ring)},
-                      {"last_ring", double(inc.last_ring)},
-                      {"ring_pitch_mm", options.incision.ring_pitch_mm},
-                      {"start_along_centerline_mm", inc.start_arc_mm},
-                      {"end_along_centerline_mm", inc.end_arc_mm},
-                      {"max_wall_distance_mm", inc.max_wall_distance_mm}});
-    }
-  }
-  if (gallbladder && wanted("gallbladder_dissection", gallbladder->label)) {
-    const SurfaceMesh gb = surface(gallbladder->name, gallbladder->surfaces().front());
-    physics::DissectionOptions dopt = options.dissection;
-    std::optional<LabelMap> truth;
-    const LabelMap* liver = nullptr;
-    if (liver_info) {
-      dopt.liver_label = liver_info->label;
-      if (labels.count(dopt.liver_label) > 0) {
-        liver = &labels;
-      } else if (fs::exists(truth_file)) {
-        truth = read_label_map(truth_file);
-        // The phantom's ground truth is in the same patient frame (LPS mm); its grid may differ.
-        if (truth->count(dopt.liver_label) > 0) liver = &*truth;
-      }
-    }
-    const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, dopt);
-    spdlog::info("guide: gallbladder liver bed from the {}{}", d.bed_source,
-                 d.bed_source == "liver label" && liver != &labels ? " of the phantom ground truth" : "");
-    emit(d.line, {{"bed_area_mm2", d.bed_area_mm2},
-                  {"bed_from_liver_label", d.bed_source == "liver label" ? 1.0 : 0.0},
-                  {"max_surface_distance_mm", d.max_surface_distance_mm}});
-  }
-  return written;
 }
 
 }  // namespace organsmith

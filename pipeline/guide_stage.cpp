@@ -1,0 +1,117 @@
+#include "pipeline/guide_stage.h"
+
+#include "core/errors.h"
+#include "meshing/export.h"
+#include "physics/contact.h"
+#include "pipeline/image_io.h"
+#include "pipeline/output_layout.h"
+#include "pipeline/runner.h"
+#include "viewer/mesh_files.h"
+
+#include <spdlog/spdlog.h>
+
+#include <algorithm>
+
+namespace organsmith {
+
+namespace fs = std::filesystem;
+
+const std::vector<std::string>& builtin_path_names() {
+  static const std::vector<std::string> names = {"trachea_centerline", "trachea_incision", "gallbladder_dissection"};
+  return names;
+}
+
+GuideFiles read_guide_inputs(const fs::path& out_dir, bool ras) {
+  const OutputLayout layout{out_dir};
+  GuideFiles f;
+  fs::path labels_file = layout.labels();
+  if (!fs::exists(labels_file) && fs::exists(layout.phantom_truth())) labels_file = layout.phantom_truth();
+  if (!fs::exists(labels_file))
+    throw InputError(ExitCode::input_not_found, "no label map in the output directory", layout.labels(),
+                     "run `organsmith run` (or `organsmith segment`) into this directory first");
+  f.labels = read_label_map(labels_file);
+  if (fs::exists(layout.phantom_truth())) f.truth = read_label_map(layout.phantom_truth());
+  f.surface = [layout, ras](const std::string& organ, const std::string& name) {
+    // The .vtp holds the mesh stage's coordinates exactly (shortest round-trip decimals), as
+    // the run hands them over in memory; the float32 .stl only when no .vtp was written.
+    SurfaceMesh m;
+    if (const fs::path vtp = layout.surface(organ, name, "vtp"); fs::exists(vtp)) {
+      m = read_mesh_file(vtp).surface;
+    } else if (const fs::path stl = layout.surface(organ, name, "stl"); fs::exists(stl)) {
+      m = read_stl(stl);
+    } else {
+      throw InputError(ExitCode::input_not_found, "missing organ surface " + name + " (.vtp or .stl)", vtp,
+                       "run the mesh stage (`organsmith run`, or `organsmith mesh " + layout.root.string() + "`) first");
+    }
+    if (ras)  // written in RAS on request: back to LPS
+      for (auto& v : m.vertices_lps_mm) v = Eigen::Vector3d(-v.x(), -v.y(), v.z());
+    return m;
+  };
+  return f;
+}
+
+std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::path& dest_dir,
+                                              const GuideStageOptions& options, const OrganRegistry& registry) {
+  for (const auto& n : options.only)
+    if (std::find(builtin_path_names().begin(), builtin_path_names().end(), n) == builtin_path_names().end())
+      throw UsageError("unknown path '" + n + "'", "paths: trachea_centerline, trachea_incision, gallbladder_dissection");
+  const LabelMap& labels = *in.labels;
+  auto wanted = [&](const std::string& n, std::uint8_t label) {
+    if (!options.only.empty()) return std::find(options.only.begin(), options.only.end(), n) != options.only.end();
+    return labels.count(label) > 0;
+  };
+  fs::create_directories(dest_dir);
+  std::vector<std::string> written;
+  auto emit = [&](const Polyline& line, const std::vector<std::pair<std::string, double>>& props) {
+    write_text_atomic(dest_dir / (line.name + ".json"), physics::path_json(line, props));
+    write_text_atomic(dest_dir / (line.name + ".vtp"), physics::path_vtp(line));
+    written.push_back(line.name + ".json");
+    written.push_back(line.name + ".vtp");
+  };
+  // The paths belong to two organs of the registry; an organ a registry lacks has no paths.
+  const OrganInfo* trachea = registry.find("trachea");
+  const OrganInfo* gallbladder = registry.find("gallbladder");
+  const OrganInfo* liver_info = registry.find("liver");
+  const bool want_centerline = trachea && wanted("trachea_centerline", trachea->label);
+  const bool want_incision = trachea && wanted("trachea_incision", trachea->label);
+  if (want_centerline || want_incision) {
+    physics::CenterlineOptions co = options.centerline;
+    co.label = trachea->label;
+    const physics::Centerline cl = physics::trachea_centerline(labels, co);
+    if (want_centerline)
+      emit(cl.line, {{"cranial_extension_mm", cl.end_extension_mm[0]},
+                     {"caudal_extension_mm", cl.end_extension_mm[1]},
+                     {"spacing_mm", options.centerline.spacing_mm}});
+    if (want_incision) {
+      const physics::SurfaceIndex wall({in.surface(trachea->name, trachea->wall_surface())});
+      const physics::IncisionPath inc = physics::trachea_incision_path(cl, wall, options.incision);
+      emit(inc.line, {{"length_mm", inc.length_mm},
+                      {"first_ring", double(inc.first_ring)},
+                      {"last_ring", double(inc.last_ring)},
+                      {"ring_pitch_mm", options.incision.ring_pitch_mm},
+                      {"start_along_centerline_mm", inc.start_arc_mm},
+                      {"end_along_centerline_mm", inc.end_arc_mm},
+                      {"max_wall_distance_mm", inc.max_wall_distance_mm}});
+    }
+  }
+  if (gallbladder && wanted("gallbladder_dissection", gallbladder->label)) {
+    const SurfaceMesh gb = in.surface(gallbladder->name, gallbladder->surfaces().front());
+    physics::DissectionOptions dopt = options.dissection;
+    const LabelMap* liver = nullptr;
+    if (liver_info) {
+      dopt.liver_label = liver_info->label;
+      // The phantom's ground truth is in the same patient frame (LPS mm); its grid may differ.
+      if (labels.count(dopt.liver_label) > 0) liver = &labels;
+      else if (in.truth && in.truth->count(dopt.liver_label) > 0) liver = in.truth;
+    }
+    const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, dopt);
+    spdlog::info("guide: gallbladder liver bed from the {}{}", d.bed_source,
+                 d.bed_source == "liver label" && liver != &labels ? " of the phantom ground truth" : "");
+    emit(d.line, {{"bed_area_mm2", d.bed_area_mm2},
+                  {"bed_from_liver_label", d.bed_source == "liver label" ? 1.0 : 0.0},
+                  {"max_surface_distance_mm", d.max_surface_distance_mm}});
+  }
+  return written;
+}
+
+}  // namespace organsmith

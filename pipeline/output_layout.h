@@ -1,0 +1,49 @@
+#pragma once
+// Every path under an output directory, named once. `run`, the single-stage commands and the
+// readers (resume, `snapshot`, `preview`, `haptics`) all take their paths from here; a stage that
+// writes into a staging folder uses the layout of that folder (the same relative paths).
+
+#include <filesystem>
+#include <string>
+
+namespace organsmith {
+
+struct OutputLayout {
+  std::filesystem::path root;
+
+  std::filesystem::path manifest() const { return root / "manifest.json"; }
+  // phantom stage (default case)
+  std::filesystem::path phantom_dir() const { return root / "phantom"; }
+  std::filesystem::path phantom_dicom() const { return phantom_dir() / "dicom"; }
+  std::filesystem::path phantom_truth() const { return phantom_dir() / "ground_truth.nii.gz"; }
+  std::filesystem::path phantom_seeds() const { return phantom_dir() / "seeds.json"; }
+  // ingest
+  std::filesystem::path ingest() const { return root / "ingest.json"; }
+  // segment
+  std::filesystem::path labels() const { return root / "labels.nii.gz"; }
+  std::filesystem::path contours(const std::string& organ) const { return root / ("contours_" + organ + ".json"); }
+  std::filesystem::path overlays_dir() const { return root / "overlays"; }
+  // mesh (file names inside an organ's folder are export_meshes'; see meshing/export.h)
+  std::filesystem::path meshes_dir() const { return root / "meshes"; }
+  std::filesystem::path organ_dir(const std::string& organ) const { return meshes_dir() / organ; }
+  /// A surface file, e.g. surface("trachea", "trachea_wall", "vtp").
+  std::filesystem::path surface(const std::string& organ, const std::string& name, const std::string& ext) const {
+    return organ_dir(organ) / (name + "." + ext);
+  }
+  /// An organ's tetrahedral mesh, e.g. volume("gallbladder", "vtu").
+  std::filesystem::path volume(const std::string& organ, const std::string& ext) const {
+    return organ_dir(organ) / (organ + "." + ext);
+  }
+  std::filesystem::path quality(const std::string& organ) const { return organ_dir(organ) / "quality.json"; }
+  // attach
+  std::filesystem::path materials() const { return root / "materials.json"; }
+  // guide
+  std::filesystem::path paths_dir() const { return root / "paths"; }
+  std::filesystem::path path(const std::string& name, const std::string& ext) const {
+    return paths_dir() / (name + "." + ext);
+  }
+  // snapshot
+  std::filesystem::path snapshots_dir() const { return root / "snapshots"; }
+};
+
+}  // namespace organsmith
