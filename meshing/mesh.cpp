@@ -17,6 +17,7 @@
 #include <cmath>
 #include <deque>
 #include <exception>
+#include <array>
 #include <limits>
 #include <mutex>
 #include <sstream>
@@ -501,6 +502,36 @@ OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Prog
   if (present.empty())
     throw InputError(ExitCode::mesh_input, "none of the requested organs is present in the label map", {},
                      "the label map holds no voxel of any requested organ's label value; check --organ");
+
+  // Edge length and wall against the data, before anything is allocated: an edge below a tenth of
+  // a voxel or above a quarter of the organ's extent, or a wall of half the organ's extent or
+  // more, asks for a mesh that cannot be made (or for unbounded memory and time).
+  for (const auto& spec : present) {
+    std::array<std::int64_t, 3> lo{labels.grid.size_vox[0], labels.grid.size_vox[1], labels.grid.size_vox[2]}, hi{-1, -1, -1};
+    const auto& g = labels.grid;
+    for (std::int64_t k = 0; k < g.size_vox[2]; ++k)
+      for (std::int64_t j = 0; j < g.size_vox[1]; ++j)
+        for (std::int64_t i = 0; i < g.size_vox[0]; ++i)
+          if (labels.labels[g.offset(i, j, k)] == spec.label) {
+            const std::array<std::int64_t, 3> ijk{i, j, k};
+            for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], ijk[a]), hi[a] = std::max(hi[a], ijk[a]);
+          }
+    double largest = 0;
+    for (int a = 0; a < 3; ++a) largest = std::max(largest, double(hi[a] - lo[a] + 1) * g.spacing_mm[a]);
+    const double voxel = g.spacing_mm.minCoeff();
+    if (options.edge_mm < 0.1 * voxel || options.edge_mm > 0.25 * largest)
+      throw MeshInputError(spec.name + ": an edge length of " + fmt(options.edge_mm) + " mm does not fit the organ (" +
+                               fmt(largest) + " mm across, voxels of " + fmt(voxel) + " mm)",
+                           "choose an edge length from " + fmt(0.1 * voxel) + " to " + fmt(0.25 * largest) +
+                               " mm (--edge-mm, [stages.mesh] edge_mm)");
+    // Where the organ is nowhere thicker than twice its wall the wall is meshed alone (a warning
+    // says so), so the wall is only refused when it could not fit across the organ at all.
+    if (spec.model != OrganModel::solid && !(spec.wall_mm > 0 && spec.wall_mm < 0.5 * largest))
+      throw MeshInputError(spec.name + ": a wall of " + fmt(spec.wall_mm) + " mm does not fit the organ (" +
+                               fmt(largest) + " mm across)",
+                           "give a wall below " + fmt(0.5 * largest) + " mm ([stages.mesh] wall_mm, --" + spec.name +
+                               "-wall-mm)");
+  }
 
   std::vector<OrganMesh> meshed(present.size());
   std::vector<std::exception_ptr> errors(present.size());

@@ -99,8 +99,29 @@ void fail_if(bool bad, const std::string& what, const fs::path& origin, const st
 
 }  // namespace
 
+/// The 1-based line of the first byte that is not UTF-8, or 0 when the text is valid UTF-8.
+static std::size_t first_invalid_utf8_line(const std::string& text) {
+  std::size_t line = 1;
+  for (std::size_t i = 0; i < text.size();) {
+    const auto c = static_cast<unsigned char>(text[i]);
+    const int n = c < 0x80 ? 0 : (c >> 5) == 0x6 ? 1 : (c >> 4) == 0xE ? 2 : (c >> 3) == 0x1E ? 3 : -1;
+    if (n < 0 || i + std::size_t(n) >= text.size() + (n == 0 ? 1 : 0)) return line;
+    for (int k = 1; k <= n; ++k)
+      if ((static_cast<unsigned char>(text[i + std::size_t(k)]) >> 6) != 0x2) return line;
+    if (c == '\n') ++line;
+    i += std::size_t(n) + 1;
+  }
+  return 0;
+}
+
 CaseFile parse_case(const std::string& text, const fs::path& origin) {
+  if (const std::size_t bad = first_invalid_utf8_line(text))
+    throw CaseFileError("the case file is not UTF-8 text (line " + std::to_string(bad) + ")", origin,
+                        "save it as UTF-8 (a case file is TOML)");
   toml::table root = parse_toml(text, origin, "the case file", "fix the syntax (see README.md, 'Case file')");
+  if (root.empty())
+    throw CaseFileError("the case file is empty", origin,
+                        "start from `organsmith run --print-default-case` (a case needs at least [case] input)");
   CaseFile c;
   c.source = origin;
   const fs::path base = origin.empty() ? fs::current_path() : fs::absolute(origin).parent_path();
@@ -211,6 +232,10 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
     throw CaseFileError("[stages.segment] presets must be a table" + where(*p), origin,
                         "write [stages.segment.presets.<organ>] tables");
   }
+  // Last, so that every other mistake of a fragment is named first.
+  if (!root["case"]["input"])
+    throw CaseFileError("the case names no input ([case] input)", origin,
+                        "give input = \"scans/…\" (DICOM, NIfTI, NRRD, MHA) or input = \"phantom\"");
   return c;
 }
 
@@ -228,10 +253,16 @@ void set_segment_presets(CaseFile& c, const std::string& toml_text, const fs::pa
 }
 
 CaseFile load_case_file(const fs::path& path) {
+  std::error_code ec;
+  if (!fs::exists(path, ec))
+    throw InputError(ExitCode::input_not_found, "the case file does not exist", path,
+                     "check the path; `organsmith run` without a case runs the embedded default");
+  if (!fs::is_regular_file(path, ec))
+    throw InputError(ExitCode::input_not_found, "the case file is not a regular file", path,
+                     "give a TOML file (see `organsmith run --print-default-case`)");
   const auto text = read_file(path);
   if (!text)
-    throw CaseFileError("cannot open the case file", path,
-                        "check the path; `organsmith run` without a case runs the embedded default");
+    throw InputError(ExitCode::input_not_found, "cannot read the case file", path, "check its permissions");
   return parse_case(*text, path);
 }
 

@@ -5,6 +5,7 @@
 
 #include "core/errors.h"
 #include "core/format.h"
+#include "physics/calibration.h"
 #include "physics/clip.h"
 #include "physics/degradation.h"
 #include "pipeline/commands.h"
@@ -32,6 +33,9 @@ namespace fs = std::filesystem;
 using namespace organsmith::physics;
 
 namespace {
+
+/// The most time steps a degradation run may take (≈ 70 years at the default 0.25 days).
+constexpr double kMaxSteps = 100000;
 
 std::string num(double v) { return format_g(v, 10); }
 
@@ -251,6 +255,10 @@ int run_simulate(const DegradeFlags& f) {
   if (!(f.load_n >= 0)) throw UsageError("--load-n must be ≥ 0 N (got " + num(f.load_n) + ")");
   if (!(f.weeks > 0) || f.weeks > 520) throw UsageError("--weeks must lie in (0, 520] (got " + num(f.weeks) + ")");
   if (!(f.dt_days > 0) || f.dt_days > 7) throw UsageError("--dt-days must lie in (0, 7] (got " + num(f.dt_days) + ")");
+  if (7.0 * f.weeks / f.dt_days > kMaxSteps)
+    throw UsageError("--weeks " + num(f.weeks) + " at --dt-days " + num(f.dt_days) + " is more than " +
+                         num(kMaxSteps) + " time steps",
+                     "use a larger --dt-days (0.25 is the default)");
   OutputDir dir(f.out, OutputDirOptions{.inputs = {f.clip}, .command = "degrade"});
   const ClipModel model(load_preset(f), f.elements);
   DegradationOptions o;
@@ -360,6 +368,13 @@ int run_fit(const DegradeFlags& f) {
   if (!(f.dt_days > 0) || f.dt_days > 7) throw UsageError("--dt-days must lie in (0, 7] (got " + num(f.dt_days) + ")");
   OutputDir out_dir(f.out, OutputDirOptions{.inputs = {f.fit, f.clip}, .command = "degrade"});
   const MassSeries data = read_mass_csv(f.fit, f.max_increase);
+  if (data.t_days.size() > 100000)
+    throw CalibrationDataError("the mass series has " + std::to_string(data.t_days.size()) + " rows", f.fit,
+                               "give at most 100 000 (weighings are days apart; resample a logger's series)");
+  if (data.t_days.back() / f.dt_days > kMaxSteps)
+    throw CalibrationDataError("the mass series reaches day " + num(data.t_days.back()) + ": more than " +
+                                   num(kMaxSteps) + " time steps of " + num(f.dt_days) + " days",
+                               f.fit, "check the time column (days), or use a larger --dt-days");
   const ClipModel model(load_preset(f), f.elements);
   DegradationOptions o;
   o.load_N = f.load_n;

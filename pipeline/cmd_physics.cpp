@@ -406,7 +406,7 @@ std::vector<Command> physics_commands(CLI::App& app) {
       "kelvin-cutting: displacement_m, force_n [, specimen].");
   cal_model->add_to(calibrate_cmd, true);
   calibrate_cmd->add_option("--data", *cal_data, "measurements (CSV, header row; stress in Pa, displacement in m, force in N)")
-      ->required()->check(CLI::ExistingFile);
+      ->required();
   calibrate_cmd->add_option("--out", *cal_out, "output directory: new, empty, or one organsmith wrote before (other files are never touched)")->required();
   cal_fit->add_to(calibrate_cmd);
   commands.push_back({calibrate_cmd, [=] { return run_calibrate(*cal_model, *cal_fit, *cal_data, *cal_out); }});
@@ -435,7 +435,7 @@ std::vector<Command> physics_commands(CLI::App& app) {
   uncertainty->add_option("--stretches", un->stretches, "mc: stretches (comma-separated; default 1.25,1.30,…,1.55)")->delimiter(',');
   uncertainty->add_option("--samples", un->samples, "mc: number of draws (default 10000)")->check(CLI::Range(2, 100000000));
   uncertainty->add_option("--mc-seed", un->seed, "mc: random seed (default 1)");
-  uncertainty->add_option("--data", un->data, "dc: measurements with a 'specimen' column")->check(CLI::ExistingFile);
+  uncertainty->add_option("--data", un->data, "dc: measurements with a 'specimen' column");
   uncertainty->add_option("--out", un->out, "output directory: new, empty, or one organsmith wrote before (other files are never touched)")->required();
   un_model->add_to(uncertainty, false);
   un_fit->add_to(uncertainty);

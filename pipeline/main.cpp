@@ -165,6 +165,7 @@ int cmd_run(const std::string& case_path, const std::string& out, bool force, co
 }  // namespace
 
 int main(int argc, char** argv) {
+  install_interrupt_handler();  // first: a Ctrl-C at any moment cancels cleanly (exit 40)
   auto logger = spdlog::stderr_color_mt("organsmith");
   spdlog::set_default_logger(logger);
   spdlog::set_pattern("%^[%l]%$ %v");
@@ -213,7 +214,7 @@ int main(int argc, char** argv) {
   auto* run = app.add_subcommand("run", "Run every stage of a case (TOML). Without a case file, runs the embedded\n"
                                         "default: the phantom, written to out/phantom/, then each stage into out/.\n"
                                         "Stages whose inputs and options are unchanged are reused.");
-  run->add_option("CASE", case_path, "case file (see README.md, 'Case file')")->check(CLI::ExistingFile);
+  run->add_option("CASE", case_path, "case file (see README.md, 'Case file')");
   run->add_option("--out", run_out, "output directory (overrides the case's [output] dir)");
   run->add_flag("--force", force, "redo every stage even when unchanged");
   run->add_option("--until", until, "stop after this stage (phantom, ingest, segment, …)");

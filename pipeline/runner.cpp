@@ -139,6 +139,12 @@ class Runner {
     execute({"ingest", fingerprint("ingest", ingest_opts.dump() + organs + input_stat_digest(input)),
              [&](const fs::path& staging) { write_ingest(staging); }});
 
+    // A case with no organ can only be read (--until ingest): there is nothing to segment or mesh.
+    // Checked after ingest, so that a bad input is reported as what it is first.
+    if (case_.organs.empty() && !done_)
+      throw CaseFileError("the case names no organ to model", case_.source,
+                          "add [[organ]] tables (name = \"gallbladder\" with a seed, name = \"trachea\"), or run "
+                          "--until ingest to only read the input");
     if (!case_.organs.empty()) {
       const nlohmann::json seg_opts = stage_json(case_, "segment");
       execute({"segment", fingerprint("segment", seg_opts.dump() + registry_digest() + outputs_digest("ingest")),

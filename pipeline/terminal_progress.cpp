@@ -1,5 +1,6 @@
 #include "pipeline/terminal_progress.h"
 
+#include <signal.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -12,14 +13,21 @@ volatile std::sig_atomic_t g_interrupted = 0;  // set by the SIGINT handler only
 extern "C" void on_sigint(int) { g_interrupted = 1; }
 }  // namespace
 
-TerminalProgress::TerminalProgress(bool quiet) : tty_(isatty(STDERR_FILENO) != 0), quiet_(quiet) {
-  std::signal(SIGINT, on_sigint);
+void install_interrupt_handler() {
+  struct sigaction sa {};
+  sa.sa_handler = on_sigint;
+  sigemptyset(&sa.sa_mask);
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
 }
 
-TerminalProgress::~TerminalProgress() {
-  finish();
-  std::signal(SIGINT, SIG_DFL);
+bool interrupted() { return g_interrupted != 0; }
+
+TerminalProgress::TerminalProgress(bool quiet) : tty_(isatty(STDERR_FILENO) != 0), quiet_(quiet) {
+  install_interrupt_handler();
 }
+
+TerminalProgress::~TerminalProgress() { finish(); }
 
 bool TerminalProgress::cancelled() const { return g_interrupted != 0; }
 

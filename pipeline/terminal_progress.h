@@ -11,6 +11,13 @@
 
 namespace organsmith {
 
+/// Makes SIGINT and SIGTERM request cancellation (instead of killing the process): every
+/// Progress::cancelled() then returns true and the running stage stops with exit 40, leaving
+/// nothing half-written. Installed first thing in main, and kept for the whole process.
+void install_interrupt_handler();
+/// True once SIGINT or SIGTERM arrived.
+bool interrupted();
+
 /// Prints progress to stderr. On a TTY it redraws one line "[#####.....]  45 % what"; elsewhere
 /// it prints a plain line each time a task passes another 25 %. Ctrl-C requests cancellation.
 class TerminalProgress final : public Progress {

@@ -6,6 +6,7 @@
 
 #include <toml++/toml.h>
 
+#include <cmath>
 #include <set>
 #include <string>
 
@@ -21,8 +22,11 @@ void get(const toml::table& t, const std::string& organ, Seen& seen, const char*
   seen.insert(key);
   const toml::node* n = t.get(key);
   if (!n) return;
-  if (auto d = n->value<double>()) v = *d;
-  else throw CaseFileError("organ preset '" + organ + "." + key + "' must be a number", {});
+  const auto d = n->value<double>();
+  if (!d) throw CaseFileError("organ preset '" + organ + "." + key + "' must be a number", {});
+  if (!std::isfinite(*d))  // a NaN or infinite preset would reach the snake's arithmetic
+    throw CaseFileError("organ preset '" + organ + "." + key + "' must be a finite number", {});
+  v = *d;
 }
 void get(const toml::table& t, const std::string& organ, Seen& seen, const char* key, int& v) {
   double d = v;
