@@ -1,10 +1,9 @@
 #pragma once
-// SHA-256 (FIPS 180-4) for output digests in the run manifest and input digests.
+// SHA-256 (FIPS 180-4) for output digests in the run manifest and input digests. The hashing is
+// Debian's nettle library; its types stay in core/sha256.cpp.
 
-#include <array>
-#include <cstdint>
 #include <filesystem>
-#include <span>
+#include <memory>
 #include <string>
 #include <string_view>
 
@@ -14,17 +13,17 @@ namespace organsmith {
 class Sha256 {
  public:
   Sha256();
+  ~Sha256();
+  Sha256(Sha256&&) noexcept;
+  Sha256& operator=(Sha256&&) noexcept;
   void update(const void* data, std::size_t bytes);
   void update(std::string_view s) { update(s.data(), s.size()); }
   /// Finishes and returns the digest as 64 lower-case hex characters. Call once.
   std::string hex_digest();
 
  private:
-  void compress(const std::uint8_t* block);
-  std::array<std::uint32_t, 8> h_;
-  std::array<std::uint8_t, 64> buffer_{};
-  std::size_t buffered_ = 0;
-  std::uint64_t total_bytes_ = 0;
+  struct State;  // nettle's sha256_ctx
+  std::unique_ptr<State> state_;
 };
 
 /// Hex SHA-256 of a byte string.

@@ -1,13 +1,13 @@
 // `organsmith degrade`: strain-energy-driven degradation of the magnesium micro-clip (thesis ch. 6,
-// physics/degradation.h). Simulates the deployed clip under the wound load and writes the Fig. 6.8
+// physics/degradation/degradation.h). Simulates the deployed clip under the wound load and writes the Fig. 6.8
 // stages as VTK XML polylines, the mass curve and a summary; with --fit, calibrates τ_D to a
-// mass-remaining series (Table 6.1). Output formats: physics/DEGRADATION.md ("Outputs").
+// mass-remaining series (Table 6.1). Output formats: physics/degradation/DEGRADATION.md ("Outputs").
 
 #include "core/errors.h"
 #include "core/format.h"
-#include "physics/calibration.h"
-#include "physics/clip.h"
-#include "physics/degradation.h"
+#include "physics/materials/calibration.h"
+#include "physics/degradation/clip.h"
+#include "physics/degradation/degradation.h"
 #include "pipeline/commands.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/runner.h"

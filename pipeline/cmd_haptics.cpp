@@ -1,15 +1,15 @@
 // `guide` (guidance paths of a run's output directory: trachea centreline and incision,
 // gallbladder dissection, or a user's recorded path) and `haptics` (replays a scripted trajectory
 // through the 1 kHz force loop and reports path following, forces and loop timing).
-// The science is in physics/HAPTICS.md.
+// The science is in physics/haptics/HAPTICS.md.
 
 #include "core/errors.h"
 #include "meshing/export.h"
-#include "physics/contact.h"
-#include "physics/guidance.h"
-#include "physics/haptic_loop.h"
-#include "physics/paths.h"
-#include "physics/presets.h"
+#include "physics/haptics/contact.h"
+#include "physics/haptics/guidance.h"
+#include "physics/haptics/haptic_loop.h"
+#include "physics/haptics/paths.h"
+#include "physics/materials/presets.h"
 #include "pipeline/commands.h"
 #include "pipeline/case_file.h"
 #include "pipeline/organ_registry.h"

@@ -4,7 +4,7 @@
 #include "core/errors.h"
 #include "meshing/export.h"
 #include "meshing/mesh.h"
-#include "physics/presets.h"
+#include "physics/materials/presets.h"
 #include "pipeline/commands.h"
 #include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"

@@ -4,9 +4,9 @@
 
 #include "core/errors.h"
 #include "core/format.h"
-#include "physics/calibration.h"
-#include "physics/presets.h"
-#include "physics/uncertainty.h"
+#include "physics/materials/calibration.h"
+#include "physics/materials/presets.h"
+#include "physics/materials/uncertainty.h"
 #include "pipeline/commands.h"
 #include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"

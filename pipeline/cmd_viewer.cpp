@@ -2,10 +2,10 @@
 // directory) and `preview` (the interactive window with a mouse-driven tool).
 
 #include "core/errors.h"
-#include "physics/contact.h"
-#include "physics/guidance.h"
-#include "physics/haptic_loop.h"
-#include "physics/models.h"
+#include "physics/haptics/contact.h"
+#include "physics/haptics/guidance.h"
+#include "physics/haptics/haptic_loop.h"
+#include "physics/materials/models.h"
 #include "pipeline/commands.h"
 #include "pipeline/case_file.h"
 #include "pipeline/organ_registry.h"

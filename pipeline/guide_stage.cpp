@@ -2,7 +2,7 @@
 
 #include "core/errors.h"
 #include "meshing/export.h"
-#include "physics/contact.h"
+#include "physics/haptics/contact.h"
 #include "pipeline/image_io.h"
 #include "pipeline/output_layout.h"
 #include "pipeline/runner.h"

@@ -2,7 +2,7 @@
 // The guide stage (guidance paths), shared by `organsmith run` (inputs in memory) and
 // `organsmith guide` (inputs read from an output directory).
 
-#include "physics/paths.h"
+#include "physics/haptics/paths.h"
 #include "pipeline/organ_registry.h"
 
 #include "core/geometry.h"

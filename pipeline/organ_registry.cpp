@@ -2,7 +2,7 @@
 
 #include "core/errors.h"
 #include "core/toml_parse.h"
-#include "physics/presets.h"
+#include "physics/materials/presets.h"
 #include "pipeline/stage_options.h"
 #include "segmentation/presets.h"
 

@@ -1,9 +1,9 @@
 #include "pipeline/output_scene.h"
 
 #include "core/errors.h"
-#include "physics/paths.h"
-#include "physics/presets.h"
-#include "physics/uncertainty.h"
+#include "physics/haptics/paths.h"
+#include "physics/materials/presets.h"
+#include "physics/materials/uncertainty.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
 #include "pipeline/organ_registry.h"
@@ -261,7 +261,7 @@ std::vector<Plot> material_plots(const fs::path& out, const OrganRegistry& regis
   laws.log_y = true;
   laws.note = "materials.json (attach stage); dashed: 5 % and 95 % of 2000 Monte Carlo draws over the thesis' sd";
   Plot cdf;
-  constexpr double kMaxStretch = 1.6;  // the calibrated range (physics/HAPTICS.md: ε ≤ 0.6)
+  constexpr double kMaxStretch = 1.6;  // the calibrated range (physics/haptics/HAPTICS.md: ε ≤ 0.6)
   std::vector<physics::LoadPoint> pts;
   // Stretch 1.01, 1.02, …, 1.60; the unloaded state (zero stress) has no place on the chart's
   // logarithmic axis.

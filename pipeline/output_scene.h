@@ -7,7 +7,7 @@
 #include "core/progress.h"
 #include "core/volume.h"
 #include "meshing/mesh.h"
-#include "physics/models.h"
+#include "physics/materials/models.h"
 #include "pipeline/organ_registry.h"
 #include "viewer/scene.h"
 

@@ -1,13 +1,13 @@
 #pragma once
 // The interactive preview: a VTK window with the organs, guidance paths and a tool proxy driven
 // by the mouse through the haptics device interface (screen-plane motion; wheel for depth). The
-// haptic loop (physics/haptic_loop.h) runs at its rate (1 kHz) in its own thread; the window
+// haptic loop (physics/haptics/haptic_loop.h) runs at its rate (1 kHz) in its own thread; the window
 // draws the tool where the loop puts it, the force arrow, and the organ surface deformed around
 // the contact. Keys 1/2/3 switch guidance-only, mixed and reaction-only forces.
 
-#include "physics/contact.h"
-#include "physics/guidance.h"
-#include "physics/haptic_loop.h"
+#include "physics/haptics/contact.h"
+#include "physics/haptics/guidance.h"
+#include "physics/haptics/haptic_loop.h"
 #include "viewer/display.h"
 #include "viewer/scene.h"
 

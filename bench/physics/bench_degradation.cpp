@@ -3,8 +3,8 @@
 // times and prints the minimum and median wall time (the machine is shared; the minimum is the
 // figure least disturbed by other work) and the thread CPU time.
 
-#include "physics/clip.h"
-#include "physics/degradation.h"
+#include "physics/degradation/clip.h"
+#include "physics/degradation/degradation.h"
 
 #include <algorithm>
 #include <chrono>

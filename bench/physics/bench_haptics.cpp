@@ -6,11 +6,11 @@
 // meshes/ and paths/ (default: ORGANSMITH_SOURCE_DIR/out); without it the phantom part is skipped.
 
 #include "meshing/export.h"
-#include "physics/contact.h"
-#include "physics/guidance.h"
-#include "physics/haptic_loop.h"
-#include "physics/paths.h"
-#include "physics/presets.h"
+#include "physics/haptics/contact.h"
+#include "physics/haptics/guidance.h"
+#include "physics/haptics/haptic_loop.h"
+#include "physics/haptics/paths.h"
+#include "physics/materials/presets.h"
 #include "tests/physics/synthetic_meshes.h"
 
 #include <Eigen/Geometry>

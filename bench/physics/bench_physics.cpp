@@ -6,9 +6,9 @@
 //    target ≤ 20 ms.
 // The summary lines are printed after the Google Benchmark table.
 
-#include "physics/calibration.h"
-#include "physics/presets.h"
-#include "physics/uncertainty.h"
+#include "physics/materials/calibration.h"
+#include "physics/materials/presets.h"
+#include "physics/materials/uncertainty.h"
 
 #include <benchmark/benchmark.h>
 

@@ -12,9 +12,9 @@
 // A statistical study, not a speed benchmark: it is not in `make bench`. N = 40 takes a few
 // minutes on two cores (every fit runs ~30 degradation simulations of a 60-element clip).
 
-#include "physics/calibration.h"
-#include "physics/clip.h"
-#include "physics/degradation.h"
+#include "physics/materials/calibration.h"
+#include "physics/degradation/clip.h"
+#include "physics/degradation/degradation.h"
 
 #include <tbb/parallel_for.h>
 

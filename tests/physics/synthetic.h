@@ -2,8 +2,8 @@
 // Synthetic test curves: a model evaluated at a parameter set, with 2 % multiplicative Gaussian
 // noise (each stress multiplied by 1 + 0.02·N(0,1)), as in the round-trip criteria.
 
-#include "physics/calibration.h"
-#include "physics/models.h"
+#include "physics/materials/calibration.h"
+#include "physics/materials/models.h"
 
 #include <vector>
 

@@ -1,8 +1,8 @@
 // Calibration: CSV validation, determinism, and round trips of the thesis parameter sets
 // (Tables 5.1.1, 5.1.2, 4.2.2) through 2 %-noise synthetic curves.
 
-#include "physics/calibration.h"
-#include "physics/presets.h"
+#include "physics/materials/calibration.h"
+#include "physics/materials/presets.h"
 #include "synthetic.h"
 
 #include <Eigen/Dense>

@@ -1,7 +1,7 @@
 // The physics subcommands as a user runs them: outputs, determinism, exit codes.
 
-#include "physics/calibration.h"
-#include "physics/models.h"
+#include "physics/materials/calibration.h"
+#include "physics/materials/models.h"
 
 #include "../pipeline/test_support.h"
 

@@ -1,9 +1,9 @@
 // Clip degradation (thesis ch. 6): preset checks, derivatives of the potential, the incremental
 // minimisation and its safeguards, the energy map, the degradation law and the τ_D calibration.
 
-#include "physics/calibration.h"
-#include "physics/clip.h"
-#include "physics/degradation.h"
+#include "physics/materials/calibration.h"
+#include "physics/degradation/clip.h"
+#include "physics/degradation/degradation.h"
 
 #include <Eigen/Eigenvalues>
 #include <gtest/gtest.h>
@@ -360,7 +360,7 @@ void round_trip(double tau, int group) {
   // of fits are within 2 % for days 1, 3, 7, 14, 28 and 52–58 % for every 3.5 days; the linearised
   // (Cramér–Rao) spread of τ_D is 5.8 % and 3.1 %. So this is a regression check of the fitter on
   // fixed draws (it fails if the fit is biased or lands on a wrong minimum), not evidence that the
-  // 2 % target holds for any draw — see DEGRADATION.md.
+  // 2 % target holds for any draw — see physics/degradation/DEGRADATION.md.
   EXPECT_LE(errors[1], 0.02) << "median |error| over 3 noisy fits";
 }
 

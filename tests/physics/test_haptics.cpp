@@ -1,11 +1,11 @@
 // Guidance paths, the staged guidance field, the reaction force and the force loop (issue 6).
 
 #include "core/errors.h"
-#include "physics/contact.h"
-#include "physics/guidance.h"
-#include "physics/haptic_loop.h"
-#include "physics/paths.h"
-#include "physics/presets.h"
+#include "physics/haptics/contact.h"
+#include "physics/haptics/guidance.h"
+#include "physics/haptics/haptic_loop.h"
+#include "physics/haptics/paths.h"
+#include "physics/materials/presets.h"
 #include "pipeline/phantom.h"
 #include "tests/physics/synthetic_meshes.h"
 

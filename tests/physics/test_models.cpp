@@ -3,8 +3,8 @@
 // where the printed equations of the thesis depart from the energy.
 
 #include "core/errors.h"
-#include "physics/models.h"
-#include "physics/presets.h"
+#include "physics/materials/models.h"
+#include "physics/materials/presets.h"
 
 #include <gtest/gtest.h>
 

@@ -1,7 +1,7 @@
 // The embedded thesis parameter sets: complete, consistent with the models, and with their source.
 
 #include "core/errors.h"
-#include "physics/presets.h"
+#include "physics/materials/presets.h"
 
 #include <gtest/gtest.h>
 

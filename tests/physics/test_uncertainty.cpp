@@ -1,8 +1,8 @@
 // Reproduction of §4.1: the ∂f/∂Ci tables (4.1.2, 4.1.3), the IMVFOSM solve (Tables 4.1.4,
 // 4.1.5), Monte Carlo against the linearised prediction, the DC method and the 3σ check.
 
-#include "physics/presets.h"
-#include "physics/uncertainty.h"
+#include "physics/materials/presets.h"
+#include "physics/materials/uncertainty.h"
 
 #include <Eigen/Dense>
 #include <gtest/gtest.h>

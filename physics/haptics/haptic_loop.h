@@ -11,8 +11,8 @@
 //
 // Units: LPS mm, N, s.
 
-#include "physics/contact.h"
-#include "physics/guidance.h"
+#include "physics/haptics/contact.h"
+#include "physics/haptics/guidance.h"
 
 #include <Eigen/Core>
 

@@ -4,13 +4,13 @@
 // outside from angle-weighted pseudo-normals); the penetration depth gives a strain, the organ's
 // calibrated law gives the stress through a precomputed table (as the thesis did), and the force
 // acts along the surface normal. Also the local surface deformation drawn around the contact.
-// Derivations and units are in physics/HAPTICS.md. No Embree type crosses this header.
+// Derivations and units are in physics/haptics/HAPTICS.md. No Embree type crosses this header.
 //
 // Units: LPS mm, N, Pa.
 
 #include "core/geometry.h"
 #include "core/material.h"
-#include "physics/models.h"
+#include "physics/materials/models.h"
 
 #include <Eigen/Core>
 

@@ -1,4 +1,4 @@
-#include "physics/haptic_loop.h"
+#include "physics/haptics/haptic_loop.h"
 
 #include "core/errors.h"
 

@@ -5,7 +5,7 @@
 
 #include "core/errors.h"
 #include "core/progress.h"
-#include "physics/models.h"
+#include "physics/materials/models.h"
 
 #include <cstdint>
 #include <filesystem>

@@ -1,7 +1,7 @@
 #pragma once
 // Haptic guidance toward a predefined path (thesis §5.2.2–5.2.3, eqs 5.2.3–5.2.8): the nearest
 // point of the path, the staged potential field and its force, and the gradient-descent pull.
-// Derivations, units and the departures from the print are in physics/HAPTICS.md.
+// Derivations, units and the departures from the print are in physics/haptics/HAPTICS.md.
 //
 // Units: positions in LPS mm, stiffness ξ in N/mm, forces in N, energies in mJ (N·mm).
 

@@ -1,8 +1,8 @@
-#include "physics/paths.h"
+#include "physics/haptics/paths.h"
 
 #include "core/errors.h"
 #include "core/file_io.h"
-#include "physics/contact.h"
+#include "physics/haptics/contact.h"
 
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>

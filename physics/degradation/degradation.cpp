@@ -1,8 +1,8 @@
-#include "physics/degradation.h"
+#include "physics/degradation/degradation.h"
 #include "core/file_io.h"
 #include "core/format.h"
 
-#include "physics/calibration.h"
+#include "physics/materials/calibration.h"
 
 #include <Eigen/SparseCholesky>
 

@@ -1,7 +1,7 @@
-#include "physics/contact.h"
+#include "physics/haptics/contact.h"
 
 #include "core/errors.h"
-#include "physics/presets.h"
+#include "physics/materials/presets.h"
 
 #include <Eigen/Geometry>
 #include <embree3/rtcore.h>

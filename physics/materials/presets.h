@@ -2,7 +2,7 @@
 // The thesis' parameter sets (data/materials.toml, embedded at build time) as Materials.
 
 #include "core/material.h"
-#include "physics/models.h"
+#include "physics/materials/models.h"
 
 #include <Eigen/Core>
 

@@ -1,4 +1,4 @@
-#include "physics/models.h"
+#include "physics/materials/models.h"
 
 #include "core/errors.h"
 

@@ -1,4 +1,4 @@
-#include "physics/guidance.h"
+#include "physics/haptics/guidance.h"
 
 #include "core/errors.h"
 

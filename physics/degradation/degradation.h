@@ -3,7 +3,7 @@
 // (6.2–6.5), the incremental minimisation K·u = P (6.8–6.13), the degradation law
 // ḋ = (1 − d)(k0 + √E*/τ_D) (6.14–6.16 plus a baseline term) integrated in time with the energy
 // re-minimised as the clip weakens, element fracture, mass remaining, and the calibration of τ_D
-// to a mass-remaining series (Table 6.1). Derivations and departures: physics/DEGRADATION.md.
+// to a mass-remaining series (Table 6.1). Derivations and departures: physics/degradation/DEGRADATION.md.
 //
 // Units: mm, N, mJ (N·mm), days. E* in 6.16 is an energy density in kJ/m³ (= kPa = 1e-3 mJ/mm³)
 // and τ_D is in week·(kJ/m³)^½ — the thesis states the immersion time and Fig. 6.8's stages in
@@ -11,7 +11,7 @@
 
 #include "core/errors.h"
 #include "core/progress.h"
-#include "physics/clip.h"
+#include "physics/degradation/clip.h"
 
 #include <filesystem>
 #include <string>

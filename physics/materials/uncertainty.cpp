@@ -1,4 +1,4 @@
-#include "physics/uncertainty.h"
+#include "physics/materials/uncertainty.h"
 
 #include <Eigen/Dense>
 

@@ -1,4 +1,4 @@
-#include "physics/presets.h"
+#include "physics/materials/presets.h"
 
 #include "core/errors.h"
 #include "core/toml_parse.h"

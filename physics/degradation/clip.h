@@ -2,7 +2,7 @@
 // The bioresorbable magnesium micro-clip of thesis chapter 6 closed onto a wound in a tissue block:
 // the preset (data/clips.toml), the discretised centroid curve, the hyperelastic tissue foundation
 // and the total potential energy of clip + tissue + wound load (thesis 6.1, 6.3–6.5) with its
-// gradient and Hessian. The model and every departure from the print are in physics/DEGRADATION.md.
+// gradient and Hessian. The model and every departure from the print are in physics/degradation/DEGRADATION.md.
 //
 // Frame and units: millimetres, newtons, millijoules (N·mm), days. x runs across the wound (the
 // incision is the plane x = 0), y is normal to the tissue surface and points out of the tissue

@@ -3,8 +3,8 @@
 // mean-value first-order second-moment (IMVFOSM) method, Monte Carlo propagation to stress CDFs,
 // and the 3σ envelope check.
 
-#include "physics/calibration.h"
-#include "physics/models.h"
+#include "physics/materials/calibration.h"
+#include "physics/materials/models.h"
 
 #include <Eigen/Core>
 

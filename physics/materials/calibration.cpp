@@ -1,4 +1,4 @@
-#include "physics/calibration.h"
+#include "physics/materials/calibration.h"
 #include "core/file_io.h"
 #include "core/format.h"
 

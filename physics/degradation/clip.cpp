@@ -1,12 +1,12 @@
-#include "physics/clip.h"
+#include "physics/degradation/clip.h"
 #include "core/format.h"
 
 #include "clips_toml.h"  // generated from data/clips.toml
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/toml_parse.h"
-#include "physics/models.h"
-#include "physics/presets.h"
+#include "physics/materials/models.h"
+#include "physics/materials/presets.h"
 
 #include <toml++/toml.h>
 
