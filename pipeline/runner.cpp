@@ -1,3 +1,7 @@
+// The stage runner. Over 400 lines for a reason: it is the one place that knows every stage of a
+// run, what each reads and writes, and what its fingerprint covers; splitting the stages' bodies
+// from their fingerprints would spread that knowledge over several files.
+
 #include "pipeline/runner.h"
 
 #include "core/errors.h"
