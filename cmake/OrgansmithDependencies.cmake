@@ -30,6 +30,12 @@ organsmith_require(spdlog libspdlog-dev)
 organsmith_require(GTest libgtest-dev)
 organsmith_require(benchmark libbenchmark-dev)
 
+find_package(ZLIB QUIET)
+if(NOT ZLIB_FOUND)
+  message(FATAL_ERROR "organsmith: zlib was not found. Install the Debian package 'zlib1g-dev', or run "
+    "scripts/install-deps.")
+endif()
+
 find_package(PkgConfig QUIET)
 if(PkgConfig_FOUND)
   pkg_check_modules(TOMLPP QUIET IMPORTED_TARGET tomlplusplus)

@@ -5,6 +5,7 @@
 // series' pixels, decoded in parallel (JPEG 2000 decoding is CPU-bound).
 
 #include "core/errors.h"
+#include "core/memory.h"
 #include "pipeline/dicom.h"
 
 #include <gdcmAttribute.h>
@@ -240,12 +241,6 @@ std::vector<fs::path> list_files(const fs::path& input) {
   return files;
 }
 
-std::int64_t physical_memory_bytes() {
-  const long pages = sysconf(_SC_PHYS_PAGES);
-  const long page = sysconf(_SC_PAGE_SIZE);
-  return pages > 0 && page > 0 ? std::int64_t(pages) * page : std::int64_t(8) << 30;
-}
-
 std::string fmt_mm(double v) {
   std::ostringstream s;
   s.precision(2);
@@ -362,7 +357,7 @@ void check_modality(const SeriesSummary& s, const IngestOptions& options, Ingest
 
 void check_memory(std::int64_t voxels, const IngestOptions& options, const fs::path& input) {
   const std::int64_t budget =
-      options.max_memory_bytes > 0 ? options.max_memory_bytes : physical_memory_bytes() * 6 / 10;
+      options.max_memory_bytes > 0 ? options.max_memory_bytes : default_memory_budget_bytes();
   const std::int64_t need = voxels * std::int64_t(sizeof(float));
   if (voxels <= 0 || need > budget) {
     std::ostringstream m;

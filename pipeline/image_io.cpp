@@ -2,6 +2,8 @@
 
 #include "core/errors.h"
 #include "pipeline/itk_image_io.h"
+#include "pipeline/nifti_check.h"
+#include "core/memory.h"
 
 #include <algorithm>
 #include <cmath>
@@ -56,7 +58,16 @@ std::string volume_file_format(const fs::path& path) {
   return {};
 }
 
-Volume read_volume_file(const fs::path& path) {
+namespace {
+/// NIfTI files are checked before ITK sees them (ITK aborts on some corrupt headers).
+void check_before_reading(const fs::path& path, std::int64_t max_memory_bytes) {
+  if (volume_file_format(path).rfind("NIfTI", 0) == 0)
+    check_nifti_file(path, max_memory_bytes > 0 ? max_memory_bytes : default_memory_budget_bytes());
+}
+}  // namespace
+
+Volume read_volume_file(const fs::path& path, std::int64_t max_memory_bytes) {
+  check_before_reading(path, max_memory_bytes);
   itk_io::PlainGrid p;
   Volume v;
   itk_io::read_float(path.string(), p, [&](std::size_t n) {
@@ -69,6 +80,7 @@ Volume read_volume_file(const fs::path& path) {
 }
 
 LabelMap read_label_map(const fs::path& path) {
+  check_before_reading(path, 0);
   itk_io::PlainGrid p;
   std::vector<float> values;
   itk_io::read_float(path.string(), p, [&](std::size_t n) {

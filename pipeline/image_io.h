@@ -16,7 +16,9 @@ std::string volume_file_format(const std::filesystem::path& path);
 
 /// Reads a scalar volume (values taken as HU; NIfTI scl_slope/inter applied). Geometry is
 /// converted to LPS. Throws InputError when the file cannot be read.
-Volume read_volume_file(const std::filesystem::path& path);
+/// A NIfTI file's header and data length are checked first (pipeline/nifti_check.h) against
+/// `max_memory_bytes` (0 = 60 % of physical memory).
+Volume read_volume_file(const std::filesystem::path& path, std::int64_t max_memory_bytes = 0);
 /// Reads a label map (values cast to uint8; throws when a value is outside 0–255).
 LabelMap read_label_map(const std::filesystem::path& path);
 

@@ -20,7 +20,7 @@ IngestResult ingest(const fs::path& input, const IngestOptions& options, Progres
   IngestResult result;
   if (fs::is_regular_file(input) && is_volume_file_name(input)) {
     progress.report(0.0, "reading volume");
-    result.volume = read_volume_file(input);
+    result.volume = read_volume_file(input, options.max_memory_bytes);
     result.report.format = volume_file_format(input);
     float lo = INFINITY, hi = -INFINITY;
     for (float v : result.volume.hu) lo = std::min(lo, v), hi = std::max(hi, v);
