@@ -1,3 +1,7 @@
+// The synthetic torso phantom (data/phantom.md). Over 400 lines for a reason: it is one geometric
+// model of the anatomy (body, spine, lungs, airway tree, liver, gallbladder and their tissues),
+// whose parts share one set of dimensions and one tissue lookup per voxel.
+
 #include "pipeline/phantom.h"
 
 #include "core/errors.h"
