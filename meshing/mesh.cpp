@@ -1,3 +1,5 @@
+// Over 400 lines: the one place that orders the steps of the three mesh models (wall and body,
+// tube, solid) and checks their inputs.
 // Orchestration of the meshing stage: per organ, prepare the smoothed field, sample and remesh
 // the surfaces, build the wall bodies and tetrahedra, and measure everything. No CGAL here.
 

@@ -1,3 +1,5 @@
+// Over 400 lines: the CGAL Polygon Mesh Processing steps share one Surface_mesh type and its
+// property maps, kept in one translation unit because each CGAL unit costs minutes to compile.
 // CGAL Polygon Mesh Processing on the sampled organ surfaces: repair (largest component, holes),
 // isotropic remeshing to the target edge length, angle improvement, outward orientation, and
 // flat cuts with caps.

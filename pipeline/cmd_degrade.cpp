@@ -1,3 +1,5 @@
+// Over 400 lines: the command's two modes (simulate the clip; fit τ_D to a mass series), each
+// with its outputs and Fig. 6.8 plots.
 // `organsmith degrade`: strain-energy-driven degradation of the magnesium micro-clip (thesis ch. 6,
 // physics/degradation/degradation.h). Simulates the deployed clip under the wound load and writes the Fig. 6.8
 // stages as VTK XML polylines, the mass curve and a summary; with --fit, calibrates τ_D to a

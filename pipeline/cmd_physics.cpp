@@ -1,3 +1,5 @@
+// Over 400 lines: three commands (materials, calibrate, uncertainty) that share their model and
+// fit flags.
 // Physics subcommands: `calibrate` (GA + Levenberg–Marquardt fit of a constitutive model to a CSV
 // of measurements), `uncertainty` (DC / IMVFOSM / Monte Carlo, thesis §4.1) and `materials` (the
 // thesis parameter sets embedded from data/materials.toml).

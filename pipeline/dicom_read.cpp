@@ -1,3 +1,5 @@
+// Over 400 lines: the structure checks and the series assembly read the same header fields and
+// belong together.
 // DICOM series discovery, validation and decoding with GDCM.
 //
 // Two passes: headers of every file first (cheap: reading stops at the pixel data), so that the

@@ -216,6 +216,7 @@ class Runner {
   /// files of the stages it reuses.
   void write_paths(const fs::path& staging) {
     std::optional<GuideFiles> files;
+    std::optional<LabelMap> truth;
     GuideInputs in;
     if (labels_ && meshes_) {
       in.labels = &*labels_;
@@ -227,11 +228,7 @@ class Runner {
         throw InputError(ExitCode::input_not_found, "the mesh stage made no surface " + name, layout_.organ_dir(organ),
                          "check the mesh stage's warnings");
       };
-      if (fs::exists(layout_.phantom_truth())) {
-        files.emplace();
-        files->labels = read_label_map(layout_.phantom_truth());
-        in.truth = &files->labels;
-      }
+      if (fs::exists(layout_.phantom_truth())) in.truth = &truth.emplace(read_label_map(layout_.phantom_truth()));
     } else {
       files = read_guide_inputs(out_, case_.stages.mesh.ras);
       in = files->inputs();

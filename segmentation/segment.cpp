@@ -1,3 +1,5 @@
+// Over 400 lines: the segmentation stage: the seeded and the airway drivers, slice-to-slice
+// propagation and label assembly share one per-slice context.
 #include "segmentation/segment.h"
 
 #include "segmentation/edge_map.h"

@@ -1,3 +1,5 @@
+// Over 400 lines: every kind of snapshot view (3D organs, overview, slices, tet cuts, plots) and
+// the one renderer they share.
 // Off-screen snapshot views.
 
 #include "viewer/snapshot.h"

@@ -1,3 +1,5 @@
+// Over 400 lines: the clip model as one unit: its preset reader with every check, its geometry
+// (thesis Fig. 6.x) and the beam elements assembled on it.
 #include "physics/degradation/clip.h"
 #include "core/format.h"
 

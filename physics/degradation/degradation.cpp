@@ -1,3 +1,5 @@
+// Over 400 lines: one simulation loop (strain energy per element, degradation law,
+// re-minimisation, fracture) and the τ_D fit that runs it.
 #include "physics/degradation/degradation.h"
 #include "core/file_io.h"
 #include "core/format.h"

@@ -1,3 +1,5 @@
+// Over 400 lines: the Embree scene (RAII, built once, then queried) and the contact force with
+// its stress lookup, which share the scene's internals.
 #include "physics/haptics/contact.h"
 
 #include "core/errors.h"

@@ -1,3 +1,6 @@
+// Over 400 lines: the three guidance paths (centreline as a minimal path, incision over the
+// rings, dissection along the liver bed) and the one path file format they are read and written
+// in.
 #include "physics/haptics/paths.h"
 
 #include "core/errors.h"

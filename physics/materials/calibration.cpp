@@ -1,3 +1,5 @@
+// Over 400 lines: the genetic algorithm, the Levenberg–Marquardt polish and the calibration CSV
+// reader (with its line and column errors) of one calibration.
 #include "physics/materials/calibration.h"
 #include "core/file_io.h"
 #include "core/format.h"

@@ -1,3 +1,6 @@
+// Over 400 lines: the constitutive models of the thesis (Fung wall and organ, artery
+// log-polynomial, Mooney–Rivlin, Ogden, Kelvin cutting), each with its analytic Jacobian, behind
+// one interface.
 #include "physics/materials/models.h"
 
 #include "core/errors.h"

@@ -1,3 +1,5 @@
+// Over 400 lines: the tests of the whole haptics target (paths, guidance field, contact, loop),
+// sharing its synthetic scenes.
 // Guidance paths, the staged guidance field, the reaction force and the force loop (issue 6).
 
 #include "core/errors.h"

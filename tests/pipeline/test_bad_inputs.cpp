@@ -21,18 +21,15 @@
 using namespace organsmith;
 using organsmith::testing::run_cli;
 using organsmith::testing::ScratchDir;
+using organsmith::testing::file_digests;
+using organsmith::testing::has_staging_leftover;
+using organsmith::testing::quoted;
+using organsmith::testing::read_json;
 namespace fs = std::filesystem;
 
 namespace {
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 
-bool has_staging_leftover(const fs::path& dir) {
-  std::error_code ec;
-  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::recursive_directory_iterator(); ++it)
-    if (it->path().filename().string().find(".staging-") != std::string::npos) return true;
-  return false;
-}
 
 /// Starts the CLI with `args` (no shell), output to `log`; returns its pid.
 pid_t spawn_cli(const std::vector<std::string>& args, const fs::path& log) {
@@ -95,7 +92,7 @@ TEST(BadInputs, CaseFileMistakesHaveTheirCodesAndNameTheFile) {
   auto code = [&](const std::string& name, const std::string& text) {
     std::ofstream(tmp / name, std::ios::binary) << text;
     const fs::path out = tmp / ("out-" + name);
-    const int rc = run_cli("run " + q(tmp / name) + " --out " + q(out), &log);
+    const int rc = run_cli("run " + quoted(tmp / name) + " --out " + quoted(out), &log);
     EXPECT_NE(log.find(name), std::string::npos) << "names the file: " << log;
     // Only a case without organs gets as far as reading its input (a bad input is said first).
     if (name != "noorgan.toml") EXPECT_FALSE(fs::exists(out)) << name;
@@ -110,7 +107,7 @@ TEST(BadInputs, CaseFileMistakesHaveTheirCodesAndNameTheFile) {
                                    "[stages.segment.presets.trachea]\nalpha = nan\n"),
             int(ExitCode::case_file))
       << log;
-  EXPECT_EQ(run_cli("run " + q(tmp / "absent.toml"), &log), int(ExitCode::input_not_found)) << log;
+  EXPECT_EQ(run_cli("run " + quoted(tmp / "absent.toml"), &log), int(ExitCode::input_not_found)) << log;
   EXPECT_NE(log.find("absent.toml"), std::string::npos) << log;
 }
 
@@ -127,7 +124,7 @@ TEST(BadInputs, MeshOptionsOutOfReachOfTheDataStopAtOnce) {
   std::string log;
   for (const std::string flags : {"--edge-mm 1e9", "--edge-mm 0.001", "--gallbladder-wall-mm 1000"}) {
     const auto t0 = std::chrono::steady_clock::now();
-    EXPECT_EQ(run_cli("mesh " + q(tmp / "block.nii.gz") + " --organ gallbladder " + flags + " --out " + q(tmp / "out"),
+    EXPECT_EQ(run_cli("mesh " + quoted(tmp / "block.nii.gz") + " --organ gallbladder " + flags + " --out " + quoted(tmp / "out"),
                       &log),
               int(ExitCode::mesh_input))
         << flags << "\n" << log;
@@ -135,7 +132,7 @@ TEST(BadInputs, MeshOptionsOutOfReachOfTheDataStopAtOnce) {
     EXPECT_NE(log.find("gallbladder"), std::string::npos) << log;
     EXPECT_FALSE(fs::exists(tmp / "out")) << flags;
   }
-  EXPECT_EQ(run_cli("degrade --out " + q(tmp / "d") + " --dt-days 1e-12", &log), int(ExitCode::usage)) << log;
+  EXPECT_EQ(run_cli("degrade --out " + quoted(tmp / "d") + " --dt-days 1e-12", &log), int(ExitCode::usage)) << log;
   EXPECT_FALSE(fs::exists(tmp / "d"));
 }
 
@@ -167,7 +164,7 @@ TEST(BadInputs, InterruptAndKillMidRunThenRerun) {
   kill(pid, SIGKILL);
   wait_exit(pid, std::chrono::seconds(30));
   std::string log;
-  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(tmp / "out"), &log), 0) << log;
+  ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(tmp / "out"), &log), 0) << log;
   EXPECT_FALSE(has_staging_leftover(tmp / "out"));
   std::ifstream in(tmp / "out" / "manifest.json");
   const nlohmann::json m = nlohmann::json::parse(in);

@@ -16,24 +16,16 @@
 using namespace organsmith;
 using organsmith::testing::run_cli;
 using organsmith::testing::ScratchDir;
+using organsmith::testing::file_digests;
+using organsmith::testing::has_staging_leftover;
+using organsmith::testing::quoted;
+using organsmith::testing::read_json;
 namespace fs = std::filesystem;
 
 namespace {
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 
-/// SHA-256 of every file under `dir`, keyed by relative path.
-std::map<std::string, std::string> digests(const fs::path& dir) {
-  std::map<std::string, std::string> out;
-  for (const auto& e : fs::recursive_directory_iterator(dir))
-    if (e.is_regular_file()) out[fs::relative(e.path(), dir).generic_string()] = sha256_file(e.path());
-  return out;
-}
 
-nlohmann::json read_json(const fs::path& p) {
-  std::ifstream in(p);
-  return nlohmann::json::parse(in);
-}
 
 /// A small volume written as a DICOM series, for corrupting in the tests below.
 fs::path small_series(const fs::path& dir) {
@@ -100,7 +92,7 @@ TEST(Cli, EachBadInputHasItsOwnExitCodeAndWritesNothing) {
       {"missing path", tmp / "nowhere", "", ExitCode::input_not_found},
   };
   for (const auto& c : cases) {
-    const auto info = run_cli("info " + q(c.input) + " " + c.flags);
+    const auto info = run_cli("info " + quoted(c.input) + " " + c.flags);
     EXPECT_EQ(info.exit_code, int(c.expected)) << c.name << ": " << info.output;
     if (c.expected == ExitCode::ok) continue;
     // The message names the input and says what to do.
@@ -111,7 +103,7 @@ TEST(Cli, EachBadInputHasItsOwnExitCodeAndWritesNothing) {
     const fs::path case_file = tmp / ("case-" + std::to_string(&c - cases.data()) + ".toml");
     write_case(case_file, c.input.string());
     const fs::path out = tmp / ("out-" + std::to_string(&c - cases.data()));
-    const auto run = run_cli("run " + q(case_file) + " --out " + q(out) + " " + c.flags);
+    const auto run = run_cli("run " + quoted(case_file) + " --out " + quoted(out) + " " + c.flags);
     EXPECT_EQ(run.exit_code, int(c.expected)) << c.name << ": " << run.output;
     EXPECT_FALSE(fs::exists(out)) << c.name << ": a failed run left " << out;
   }
@@ -127,8 +119,8 @@ TEST(Cli, MemoryBudgetIsEnforcedFromTheCommandLine) {
   DicomSeriesIds ids;
   ids.uid_seed = "mem";
   write_dicom_series(v, tmp / "big", ids, np);
-  EXPECT_EQ(run_cli("info " + q(tmp / "big") + " --max-memory-mb 1").exit_code, int(ExitCode::too_large));
-  EXPECT_EQ(run_cli("info " + q(tmp / "big") + " --max-memory-mb 64").exit_code, 0);
+  EXPECT_EQ(run_cli("info " + quoted(tmp / "big") + " --max-memory-mb 1").exit_code, int(ExitCode::too_large));
+  EXPECT_EQ(run_cli("info " + quoted(tmp / "big") + " --max-memory-mb 64").exit_code, 0);
 }
 
 TEST(Cli, NoPatientIdentifierReachesOutputsOrLogs) {
@@ -136,20 +128,20 @@ TEST(Cli, NoPatientIdentifierReachesOutputsOrLogs) {
   const fs::path series = organsmith::testing::real_data_dir() / "chest-dicom-8mm" / "dicom";
   const std::string phi = "Lung_Dx-A0002";
   ScratchDir tmp("cli-phi");
-  const auto info = run_cli("info " + q(series));
+  const auto info = run_cli("info " + quoted(series));
   ASSERT_EQ(info.exit_code, 0) << info.output;
   EXPECT_EQ(info.output.find(phi), std::string::npos);
-  const auto info_json = run_cli("info --json " + q(series));
+  const auto info_json = run_cli("info --json " + quoted(series));
   EXPECT_EQ(info_json.output.find(phi), std::string::npos);
 
   write_case(tmp / "chest.toml", series.string(), "[[organ]]\nname = \"trachea\"\n");
-  const auto run = run_cli("-v run " + q(tmp / "chest.toml") + " --until ingest --out " + q(tmp / "out"));
+  const auto run = run_cli("-v run " + quoted(tmp / "chest.toml") + " --until ingest --out " + quoted(tmp / "out"));
   ASSERT_EQ(run.exit_code, 0) << run.output;
   EXPECT_EQ(run.output.find(phi), std::string::npos);
   ASSERT_GT(organsmith::testing::count_files(tmp / "out"), 1u);
   EXPECT_FALSE(organsmith::testing::any_file_contains(tmp / "out", phi));
   // Every stage, whatever the segmentation's outcome, keeps identifiers out too.
-  const auto full = run_cli("-v run " + q(tmp / "chest.toml") + " --out " + q(tmp / "full"));
+  const auto full = run_cli("-v run " + quoted(tmp / "chest.toml") + " --out " + quoted(tmp / "full"));
   EXPECT_EQ(full.output.find(phi), std::string::npos);
   if (fs::exists(tmp / "full")) EXPECT_FALSE(organsmith::testing::any_file_contains(tmp / "full", phi));
   // …and the check itself can see the name where it is: the source files hold it.
@@ -159,10 +151,10 @@ TEST(Cli, NoPatientIdentifierReachesOutputsOrLogs) {
 TEST(Cli, PhantomIsDeterministicForASeedAndReadableAsCt) {
   ScratchDir tmp("cli-phantom");
   const std::string args = " --size 96 --slice-mm 5";
-  ASSERT_EQ(run_cli("phantom --out " + q(tmp / "a") + " --seed 3" + args).exit_code, 0);
-  ASSERT_EQ(run_cli("phantom --out " + q(tmp / "b") + " --seed 3" + args).exit_code, 0);
-  ASSERT_EQ(run_cli("phantom --out " + q(tmp / "c") + " --seed 4" + args).exit_code, 0);
-  const auto a = digests(tmp / "a"), b = digests(tmp / "b"), c = digests(tmp / "c");
+  ASSERT_EQ(run_cli("phantom --out " + quoted(tmp / "a") + " --seed 3" + args).exit_code, 0);
+  ASSERT_EQ(run_cli("phantom --out " + quoted(tmp / "b") + " --seed 3" + args).exit_code, 0);
+  ASSERT_EQ(run_cli("phantom --out " + quoted(tmp / "c") + " --seed 4" + args).exit_code, 0);
+  const auto a = file_digests(tmp / "a"), b = file_digests(tmp / "b"), c = file_digests(tmp / "c");
   ASSERT_TRUE(a.count("ground_truth.nii.gz"));
   ASSERT_TRUE(a.count("seeds.json"));
   EXPECT_EQ(a.size(), 3u + 80u);  // manifest, truth, seeds; 400 mm at 5 mm = 80 slices
@@ -170,7 +162,7 @@ TEST(Cli, PhantomIsDeterministicForASeedAndReadableAsCt) {
   EXPECT_NE(a.at("dicom/IM0040.dcm"), c.at("dicom/IM0040.dcm"));
 
   // Our own reader and `info` accept it as CT with the requested geometry.
-  const auto info = run_cli("info --json " + q(tmp / "a" / "dicom"));
+  const auto info = run_cli("info --json " + quoted(tmp / "a" / "dicom"));
   ASSERT_EQ(info.exit_code, 0) << info.output;
   const auto j = nlohmann::json::parse(info.output.substr(info.output.find('{')));
   EXPECT_EQ(j["series"]["modality"], "CT");
@@ -179,7 +171,7 @@ TEST(Cli, PhantomIsDeterministicForASeedAndReadableAsCt) {
 
   // An independent DICOM toolkit (DCMTK) parses it as CT Image Storage when installed.
   if (std::system("command -v dcmdump > /dev/null 2>&1") == 0) {
-    const std::string cmd = "dcmdump " + q(tmp / "a" / "dicom" / "IM0001.dcm") + " 2>&1";
+    const std::string cmd = "dcmdump " + quoted(tmp / "a" / "dicom" / "IM0001.dcm") + " 2>&1";
     FILE* p = popen(cmd.c_str(), "r");
     std::string dump;
     char buf[4096];
@@ -196,7 +188,7 @@ TEST(Cli, RunWritesManifestAndReusesUnchangedStages) {
   write_case(tmp / "case.toml", "phantom",
              "[phantom]\nsize = 64\nslice_mm = 10\n[[organ]]\nname = \"gallbladder\"\n[[organ]]\nname = \"trachea\"\n");
   const fs::path out = tmp / "out";
-  const auto first = run_cli("run " + q(tmp / "case.toml") + " --until ingest --out " + q(out));
+  const auto first = run_cli("run " + quoted(tmp / "case.toml") + " --until ingest --out " + quoted(out));
   ASSERT_EQ(first.exit_code, 0) << first.output;
   const auto m1 = read_json(out / "manifest.json");
   EXPECT_EQ(m1["tool"]["name"], "organsmith");
@@ -227,18 +219,18 @@ TEST(Cli, RunWritesManifestAndReusesUnchangedStages) {
   }
 
   // Second run: nothing changed → every stage reused, outputs untouched.
-  const auto before = digests(out / "phantom");
-  const auto second = run_cli("run " + q(tmp / "case.toml") + " --until ingest --out " + q(out));
+  const auto before = file_digests(out / "phantom");
+  const auto second = run_cli("run " + quoted(tmp / "case.toml") + " --until ingest --out " + quoted(out));
   ASSERT_EQ(second.exit_code, 0) << second.output;
   const nlohmann::json m2 = read_json(out / "manifest.json");  // a range-for over a member of a temporary dangles
   for (const auto& st : m2["stages"]) EXPECT_EQ(st["status"], "skipped (unchanged)");
-  EXPECT_EQ(digests(out / "phantom"), before);
+  EXPECT_EQ(file_digests(out / "phantom"), before);
 
   // A changed option reruns; --force reruns everything.
   write_case(tmp / "case.toml", "phantom", "[phantom]\nsize = 64\nslice_mm = 10\nseed = 2\n");
-  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --until ingest --out " + q(out)).exit_code, 0);
+  ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --until ingest --out " + quoted(out)).exit_code, 0);
   EXPECT_EQ(read_json(out / "manifest.json")["stages"][0]["status"], "ran");
-  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --until ingest --out " + q(out) + " --force").exit_code, 0);
+  ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --until ingest --out " + quoted(out) + " --force").exit_code, 0);
   const nlohmann::json m4 = read_json(out / "manifest.json");
   for (const auto& st : m4["stages"]) EXPECT_EQ(st["status"], "ran");
   // No staging leftovers.
@@ -249,7 +241,7 @@ TEST(Cli, RunWritesManifestAndReusesUnchangedStages) {
 TEST(Cli, BadCaseFileIsReportedWithItsLine) {
   ScratchDir tmp("cli-case");
   std::ofstream(tmp / "bad.toml") << "[case]\ninput = \"phantom\"\n\n[phantom]\nsizee = 64\n";
-  const auto r = run_cli("run " + q(tmp / "bad.toml") + " --out " + q(tmp / "out"));
+  const auto r = run_cli("run " + quoted(tmp / "bad.toml") + " --out " + quoted(tmp / "out"));
   EXPECT_EQ(r.exit_code, int(ExitCode::case_file));
   EXPECT_NE(r.output.find("sizee"), std::string::npos) << r.output;
   EXPECT_NE(r.output.find("line 5"), std::string::npos) << r.output;

@@ -15,27 +15,16 @@
 using organsmith::sha256_file;
 using organsmith::testing::run_cli;
 using organsmith::testing::ScratchDir;
+using organsmith::testing::file_digests;
+using organsmith::testing::has_staging_leftover;
+using organsmith::testing::quoted;
+using organsmith::testing::read_json;
 namespace fs = std::filesystem;
-
-namespace {
-
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
-
-/// SHA-256 of every file under `dir` but the manifest (it records times), by relative path.
-std::map<std::string, std::string> digests(const fs::path& dir) {
-  std::map<std::string, std::string> out;
-  for (const auto& e : fs::recursive_directory_iterator(dir))
-    if (e.is_regular_file() && e.path().filename() != "manifest.json")
-      out[fs::relative(e.path(), dir).generic_string()] = sha256_file(e.path());
-  return out;
-}
-
-}  // namespace
 
 TEST(CliParity, SegmentMeshGuideSnapshotWriteWhatRunWrites) {
   ScratchDir tmp("cli-parity");
   std::string log;
-  ASSERT_EQ(run_cli("phantom --out " + q(tmp / "ph") + " --size 256 --seed 1", &log), 0) << log;
+  ASSERT_EQ(run_cli("phantom --out " + quoted(tmp / "ph") + " --size 256 --seed 1", &log), 0) << log;
   const nlohmann::json seeds = nlohmann::json::parse(std::ifstream(tmp / "ph" / "seeds.json"));
   const auto& s = seeds["seeds_lps_mm"]["gallbladder"];
   char seed[160];
@@ -48,21 +37,21 @@ TEST(CliParity, SegmentMeshGuideSnapshotWriteWhatRunWrites) {
                                    << "[stages.mesh]\nedge_mm = 3.0\n"
                                    << "[stages.snapshot]\nviews = [\"organs\", \"slices\"]\nwidth_px = 320\nheight_px = 240\n";
   const fs::path a = tmp / "a" / "parity", b = tmp / "b" / "parity";
-  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(a), &log), 0) << log;
+  ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(a), &log), 0) << log;
 
   // The same, stage by stage, into b/parity (the case name is the folder's name).
   std::string seed_flag = std::string("--seed=") + seed;
   seed_flag.erase(std::remove(seed_flag.begin(), seed_flag.end(), ' '), seed_flag.end());
-  ASSERT_EQ(run_cli("segment " + q(tmp / "ph" / "dicom") + " --out " + q(b) + " --organ gallbladder " + seed_flag +
+  ASSERT_EQ(run_cli("segment " + quoted(tmp / "ph" / "dicom") + " --out " + quoted(b) + " --organ gallbladder " + seed_flag +
                         " --organ trachea",
                     &log),
             0)
       << log;
-  ASSERT_EQ(run_cli("mesh " + q(b) + " --edge-mm 3 --allow-quality-failures", &log), 0) << log;
-  ASSERT_EQ(run_cli("guide " + q(b), &log), 0) << log;
-  ASSERT_EQ(run_cli("snapshot " + q(b) + " --views organs,slices --size 320x240", &log), 0) << log;
+  ASSERT_EQ(run_cli("mesh " + quoted(b) + " --edge-mm 3 --allow-quality-failures", &log), 0) << log;
+  ASSERT_EQ(run_cli("guide " + quoted(b), &log), 0) << log;
+  ASSERT_EQ(run_cli("snapshot " + quoted(b) + " --views organs,slices --size 320x240", &log), 0) << log;
 
-  const auto da = digests(a), db = digests(b);
+  const auto da = file_digests(a, "manifest.json"), db = file_digests(b, "manifest.json");
   EXPECT_GT(da.size(), 30u);
   for (const auto& [path, sha] : da) {
     ASSERT_TRUE(db.count(path)) << path << " written by run only";

@@ -15,16 +15,15 @@
 using namespace organsmith;
 using organsmith::testing::run_cli;
 using organsmith::testing::ScratchDir;
+using organsmith::testing::file_digests;
+using organsmith::testing::has_staging_leftover;
+using organsmith::testing::quoted;
+using organsmith::testing::read_json;
 namespace fs = std::filesystem;
 
 namespace {
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 
-nlohmann::json read_json(const fs::path& p) {
-  std::ifstream in(p);
-  return nlohmann::json::parse(in);
-}
 
 std::string registry_error(const std::string& text) {
   try {
@@ -100,7 +99,7 @@ TEST(OrganRegistry, ACaseAddsAThirdOrganThatIsMeshedExportedAndDrawn) {
                                       "[stages.mesh]\nedge_mm = 4.0\nformats = [\"stl\", \"vtu\", \"inp\", \"feb\"]\n"
                                       "[stages.snapshot]\nviews = [\"organs\"]\nwidth_px = 320\nheight_px = 240\n";
   std::string log;
-  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(tmp / "out"), &log), 0) << log;
+  ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(tmp / "out"), &log), 0) << log;
   const fs::path liver = tmp / "out" / "meshes" / "liver";
   const auto quality = read_json(liver / "quality.json");
   EXPECT_EQ(quality["model"], "solid");

@@ -18,29 +18,21 @@
 using namespace organsmith;
 using organsmith::testing::run_cli;
 using organsmith::testing::ScratchDir;
+using organsmith::testing::file_digests;
+using organsmith::testing::has_staging_leftover;
+using organsmith::testing::quoted;
+using organsmith::testing::read_json;
 namespace fs = std::filesystem;
 
 namespace {
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 
 void write_text(const fs::path& p, const std::string& text) {
   fs::create_directories(p.parent_path());
   std::ofstream(p, std::ios::binary) << text;
 }
 
-/// SHA-256 of every file under `dir`, keyed by relative path.
-std::map<std::string, std::string> digests(const fs::path& dir) {
-  std::map<std::string, std::string> out;
-  for (const auto& e : fs::recursive_directory_iterator(dir))
-    if (e.is_regular_file()) out[fs::relative(e.path(), dir).generic_string()] = sha256_file(e.path());
-  return out;
-}
 
-nlohmann::json read_json(const fs::path& p) {
-  std::ifstream in(p);
-  return nlohmann::json::parse(in);
-}
 
 /// A stage writer that puts `files` (relative path → text) into the staging folder.
 std::function<void(const fs::path&)> writes(std::map<std::string, std::string> files) {
@@ -49,11 +41,6 @@ std::function<void(const fs::path&)> writes(std::map<std::string, std::string> f
   };
 }
 
-bool has_staging_leftover(const fs::path& dir) {
-  for (const auto& e : fs::recursive_directory_iterator(dir))
-    if (e.path().filename().string().find(".staging-") != std::string::npos) return true;
-  return false;
-}
 
 /// The user's folder every refusal below must leave byte for byte as it was.
 fs::path users_folder(const ScratchDir& tmp) {
@@ -160,7 +147,7 @@ TEST(OutputDir, AKilledCommitIsListedAndTheRerunReplacesItsFiles) {
 TEST(OutputDir, RefusesUsersFoldersFilesAndItsOwnInput) {
   ScratchDir tmp("outdir-refuse");
   const fs::path mine = users_folder(tmp);
-  const auto before = digests(mine);
+  const auto before = file_digests(mine);
   auto refuses = [&](const fs::path& out, std::vector<fs::path> inputs) {
     try {
       OutputDir(out, OutputDirOptions{.inputs = std::move(inputs), .command = "test"});
@@ -175,7 +162,7 @@ TEST(OutputDir, RefusesUsersFoldersFilesAndItsOwnInput) {
   EXPECT_TRUE(refuses(mine / "scan", {mine / "scan"}));            // its own input
   EXPECT_TRUE(refuses(mine / "scan" / "sub", {mine / "scan"}));    // inside the input
   EXPECT_FALSE(refuses(tmp / "elsewhere", {mine / "scan"}));
-  EXPECT_EQ(digests(mine), before);
+  EXPECT_EQ(file_digests(mine), before);
   // An empty folder is fine; a folder organsmith wrote accepts its own file as input.
   fs::create_directories(tmp / "empty");
   EXPECT_FALSE(refuses(tmp / "empty", {}));
@@ -190,42 +177,42 @@ TEST(OutputDirCli, CommandsNeverDeleteTheUsersFiles) {
   ScratchDir tmp("outdir-cli");
   const fs::path mine = users_folder(tmp);
   write_text(mine / "labels.nii.gz", "a label map of the user's");
-  const auto before = digests(mine);
+  const auto before = file_digests(mine);
   std::string log;
   auto expect_refused = [&](const std::string& args) {
     const int rc = run_cli(args, &log);
     EXPECT_EQ(rc, int(ExitCode::output)) << args << "\n" << log;
     EXPECT_NE(log.find(mine.string()), std::string::npos) << "names the directory: " << log;
-    EXPECT_EQ(digests(mine), before) << args;
+    EXPECT_EQ(file_digests(mine), before) << args;
   };
-  expect_refused("segment " + q(mine / "scan") + " --out " + q(mine / "scan") + " --organ trachea");
-  expect_refused("segment " + q(mine / "scan") + " --out " + q(mine) + " --organ trachea");
-  expect_refused("mesh " + q(mine / "labels.nii.gz") + " --out " + q(mine));
-  expect_refused("phantom --out " + q(mine) + " --size 64 --slice-mm 10");
-  expect_refused("phantom --out " + q(mine / "notes.txt") + " --size 64 --slice-mm 10");
-  expect_refused("degrade --out " + q(mine) + " --weeks 1");
-  expect_refused("calibrate --model ogden --data " + q(mine / "notes.txt") + " --out " + q(mine));
+  expect_refused("segment " + quoted(mine / "scan") + " --out " + quoted(mine / "scan") + " --organ trachea");
+  expect_refused("segment " + quoted(mine / "scan") + " --out " + quoted(mine) + " --organ trachea");
+  expect_refused("mesh " + quoted(mine / "labels.nii.gz") + " --out " + quoted(mine));
+  expect_refused("phantom --out " + quoted(mine) + " --size 64 --slice-mm 10");
+  expect_refused("phantom --out " + quoted(mine / "notes.txt") + " --size 64 --slice-mm 10");
+  expect_refused("degrade --out " + quoted(mine) + " --weeks 1");
+  expect_refused("calibrate --model ogden --data " + quoted(mine / "notes.txt") + " --out " + quoted(mine));
   // `--out .` inside the user's folder.
-  const std::string in_mine = "cd " + q(mine) + " && " + std::string(ORGANSMITH_CLI) + " phantom --out . --size 64";
+  const std::string in_mine = "cd " + quoted(mine) + " && " + std::string(ORGANSMITH_CLI) + " phantom --out . --size 64";
   EXPECT_EQ(WEXITSTATUS(std::system((in_mine + " > /dev/null 2>&1").c_str())), int(ExitCode::output));
-  EXPECT_EQ(digests(mine), before);
+  EXPECT_EQ(file_digests(mine), before);
 
   // An output below a file, or where nothing can be written.
-  EXPECT_EQ(run_cli("phantom --out " + q(mine / "notes.txt" / "sub") + " --size 64 --slice-mm 10", &log),
+  EXPECT_EQ(run_cli("phantom --out " + quoted(mine / "notes.txt" / "sub") + " --size 64 --slice-mm 10", &log),
             int(ExitCode::output))
       << log;
   EXPECT_EQ(run_cli("phantom --out /proc/organsmith --size 64 --slice-mm 10", &log), int(ExitCode::output)) << log;
-  EXPECT_EQ(digests(mine), before);
+  EXPECT_EQ(file_digests(mine), before);
 }
 
 TEST(OutputDirCli, ARerunReplacesItsOwnOutputsAndKeepsTheUsersFiles) {
   ScratchDir tmp("outdir-rerun");
   const fs::path out = tmp / "ph";
   std::string log;
-  ASSERT_EQ(run_cli("phantom --out " + q(out) + " --size 64 --slice-mm 10 --seed 1", &log), 0) << log;
+  ASSERT_EQ(run_cli("phantom --out " + quoted(out) + " --size 64 --slice-mm 10 --seed 1", &log), 0) << log;
   write_text(out / "notes.txt", "mine");
   write_text(out / "dicom" / "README", "mine too");
-  ASSERT_EQ(run_cli("phantom --out " + q(out) + " --size 64 --slice-mm 20 --seed 2", &log), 0) << log;
+  ASSERT_EQ(run_cli("phantom --out " + quoted(out) + " --size 64 --slice-mm 20 --seed 2", &log), 0) << log;
   EXPECT_EQ(organsmith::testing::read_file(out / "notes.txt"), "mine");
   EXPECT_EQ(organsmith::testing::read_file(out / "dicom" / "README"), "mine too");
   // 400 mm at 20 mm: 20 slices; the 40 of the first run are gone.

@@ -15,16 +15,15 @@
 
 using organsmith::testing::run_cli;
 using organsmith::testing::ScratchDir;
+using organsmith::testing::file_digests;
+using organsmith::testing::has_staging_leftover;
+using organsmith::testing::quoted;
+using organsmith::testing::read_json;
 namespace fs = std::filesystem;
 
 namespace {
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 
-nlohmann::json read_json(const fs::path& p) {
-  std::ifstream in(p);
-  return nlohmann::json::parse(in);
-}
 
 /// stage name → status of the manifest's stage records.
 std::map<std::string, std::string> statuses(const fs::path& out) {
@@ -56,7 +55,7 @@ TEST(RunOptions, StageOptionsTakeEffectAndAChangeRerunsOnlyWhatFollowsIt) {
       "[stages.mesh]\nedge_mm = 3.0\nwall_mm = { gallbladder = 3.0 }\nformats = [\"stl\", \"vtu\", \"inp\"]\n";
   write_case(mesh_options);
   std::string log;
-  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(out) + " --until guide", &log), 0) << log;
+  ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out) + " --until guide", &log), 0) << log;
 
   // edge_mm = 3: every surface's mean edge within 3 mm ± 25 %.
   for (const char* organ : {"gallbladder", "trachea"}) {
@@ -83,14 +82,14 @@ TEST(RunOptions, StageOptionsTakeEffectAndAChangeRerunsOnlyWhatFollowsIt) {
 
   // A guide option changes only the guide stage (and the snapshot after it, not run here).
   write_case(mesh_options + "[stages.guide]\nring_count = 3\n");
-  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(out) + " --until guide", &log), 0) << log;
+  ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out) + " --until guide", &log), 0) << log;
   auto st = statuses(out);
   for (const char* s : {"phantom", "ingest", "segment", "mesh", "attach"}) EXPECT_EQ(st[s], "skipped (unchanged)") << s;
   EXPECT_EQ(st["guide"], "ran");
   EXPECT_EQ(read_json(out / "paths" / "trachea_incision.json")["properties"]["last_ring"], 5);  // 3 + 3 − 1
   // A mesh option reruns mesh and guide (which reads the meshes), not what comes before.
   write_case("[stages.mesh]\nedge_mm = 3.0\nformats = [\"stl\", \"vtu\", \"inp\"]\n[stages.guide]\nring_count = 3\n");
-  ASSERT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(out) + " --until guide", &log), 0) << log;
+  ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out) + " --until guide", &log), 0) << log;
   st = statuses(out);
   for (const char* s : {"phantom", "ingest", "segment", "attach"}) EXPECT_EQ(st[s], "skipped (unchanged)") << s;
   EXPECT_EQ(st["mesh"], "ran");
@@ -101,7 +100,7 @@ TEST(RunOptions, StageOptionsTakeEffectAndAChangeRerunsOnlyWhatFollowsIt) {
 
   // A misspelt key stops the run before anything is written, naming file, line, key and the fix.
   write_case(mesh_options + "bogus_key = 7\n");
-  EXPECT_EQ(run_cli("run " + q(tmp / "case.toml") + " --out " + q(tmp / "other"), &log), 20) << log;
+  EXPECT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(tmp / "other"), &log), 20) << log;
   EXPECT_NE(log.find("bogus_key"), std::string::npos) << log;
   EXPECT_NE(log.find("line 15"), std::string::npos) << log;
   EXPECT_NE(log.find("case.toml"), std::string::npos) << log;
@@ -121,7 +120,7 @@ TEST(RunOptions, MeshingInputProblemsExitWith60AndWriteNothing) {
   organsmith::write_label_map(speck, tmp / "speck.nii.gz");
   std::string log;
   for (const char* f : {"empty.nii.gz", "speck.nii.gz"}) {
-    EXPECT_EQ(run_cli("mesh " + q(tmp / f) + " --out " + q(tmp / "out"), &log), int(organsmith::ExitCode::mesh_input))
+    EXPECT_EQ(run_cli("mesh " + quoted(tmp / f) + " --out " + quoted(tmp / "out"), &log), int(organsmith::ExitCode::mesh_input))
         << f << "\n" << log;
     EXPECT_EQ(log.find("internal error"), std::string::npos) << log;
     EXPECT_FALSE(fs::exists(tmp / "out")) << f;

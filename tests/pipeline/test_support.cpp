@@ -1,6 +1,9 @@
 #include "test_support.h"
 
 #include "core/file_io.h"
+#include "core/sha256.h"
+
+#include <fstream>
 
 #include <array>
 #include <cstdio>
@@ -59,6 +62,28 @@ std::string read_file(const fs::path& path) { return organsmith::read_file(path)
 bool any_file_contains(const fs::path& dir, const std::string& needle) {
   for (const auto& e : fs::recursive_directory_iterator(dir))
     if (e.is_regular_file() && read_file(e.path()).find(needle) != std::string::npos) return true;
+  return false;
+}
+
+std::string quoted(const fs::path& p) { return "'" + p.string() + "'"; }
+
+nlohmann::json read_json(const fs::path& p) {
+  std::ifstream in(p);
+  return nlohmann::json::parse(in);
+}
+
+std::map<std::string, std::string> file_digests(const fs::path& dir, const std::string& skip) {
+  std::map<std::string, std::string> out;
+  for (const auto& e : fs::recursive_directory_iterator(dir))
+    if (e.is_regular_file() && (skip.empty() || e.path().filename() != skip))
+      out[fs::relative(e.path(), dir).generic_string()] = sha256_file(e.path());
+  return out;
+}
+
+bool has_staging_leftover(const fs::path& dir) {
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(dir, ec); !ec && it != fs::recursive_directory_iterator(); ++it)
+    if (it->path().filename().string().find(".staging-") != std::string::npos) return true;
   return false;
 }
 

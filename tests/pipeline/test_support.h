@@ -2,7 +2,10 @@
 // Helpers shared by the pipeline tests: where the real cases are, scratch directories, and
 // running the organsmith CLI as a user would.
 
+#include <nlohmann/json.hpp>
+
 #include <filesystem>
+#include <map>
 #include <string>
 
 namespace organsmith::testing {
@@ -37,6 +40,18 @@ std::size_t count_files(const std::filesystem::path& dir);
 
 /// The whole file as bytes (empty when it cannot be opened).
 std::string read_file(const std::filesystem::path& path);
+
+/// `p` in single quotes, for a CLI argument.
+std::string quoted(const std::filesystem::path& p);
+
+/// The JSON file `p` (throws when it is not JSON).
+nlohmann::json read_json(const std::filesystem::path& p);
+
+/// SHA-256 of every file under `dir` by relative path, leaving out files named `skip`.
+std::map<std::string, std::string> file_digests(const std::filesystem::path& dir, const std::string& skip = "");
+
+/// True when a staging folder (".<stage>.staging-<hex>") is anywhere under `dir`.
+bool has_staging_leftover(const std::filesystem::path& dir);
 
 /// True when `needle` occurs in any file under `dir`.
 bool any_file_contains(const std::filesystem::path& dir, const std::string& needle);

@@ -1,3 +1,4 @@
+// Over 400 lines: every conversion of core types to VTK and the actors every view shares.
 // Core types → VTK, and the shared pieces of every view.
 
 #include "viewer/detail/vtk_scene.h"
