@@ -334,9 +334,11 @@ class MooneyRivlin final : public Model {
   std::vector<ParameterInfo> info_;
 };
 
-// ---- Ogden (thesis 2.2.3–2.2.4), incompressible uniaxial ----------------------------------------
-// λ1 = λ, λ2 = λ3 = λ^(−1/2): W = Σ μp/αp (λ^αp + 2 λ^(−αp/2) − 3),
-// T = dW/dλ = Σ μp (λ^(αp−1) − λ^(−αp/2−1)).
+// ---- Ogden (thesis 2.2.3–2.2.4), incompressible -------------------------------------------------
+// W = Σ μp/αp (λ1^αp + λ2^αp + λ3^αp − 3) with λ3 = 1/(λ1 λ2). The loaded axis is 1 and axis 3
+// (thickness) is stress-free, so the nominal stress along 1 is T = Σ μp (λ1^αp − λ3^αp)/λ1.
+// Uniaxial: λ2 = λ3 = λ^(−1/2), T = Σ μp (λ^(αp−1) − λ^(−αp/2−1)); biaxial: λ2 is the prescribed
+// lateral stretch (equibiaxial λ2 = λ gives T = Σ μp (λ^(αp−1) − λ^(−2αp−1))).
 class Ogden final : public Model {
  public:
   explicit Ogden(int terms) {
@@ -353,26 +355,33 @@ class Ogden final : public Model {
                std::span<double> jac) const override {
     const std::size_t n = info_.size();
     for (std::size_t i = 0; i < points.size(); ++i) {
-      const double l = points[i].x, ln = std::log(l);
+      const double l1 = points[i].x;
+      const bool uni = is_uniaxial(points[i].load);
+      const double l2 = uni ? 1.0 / std::sqrt(l1) : points[i].lateral_stretch;
+      const double l3 = 1.0 / (l1 * l2);
+      const double ln1 = std::log(l1), ln3 = std::log(l3);
+      const bool ok = l1 > 0 && l2 > 0 && points[i].load != LoadCase::displacement;
       double T = 0;
       for (std::size_t k = 0; k < n; k += 2) {
         const double mu = p[k], al = p[k + 1];
-        const double e1 = std::pow(l, al - 1), e2 = std::pow(l, -al / 2 - 1);
-        T += mu * (e1 - e2);
+        const double e1 = std::pow(l1, al) / l1, e3 = std::pow(l3, al) / l1;
+        T += mu * (e1 - e3);
         if (!jac.empty()) {
-          jac[i * n + k] = e1 - e2;
-          jac[i * n + k + 1] = mu * ln * (e1 + 0.5 * e2);
+          jac[i * n + k] = e1 - e3;
+          jac[i * n + k + 1] = mu * (e1 * ln1 - e3 * ln3);
         }
       }
-      out[i] = l > 0 ? T : kNaN;
+      out[i] = ok ? T : kNaN;
     }
   }
   double energy(const LoadPoint& pt, std::span<const double> p) const override {
-    const double l = pt.x;
+    const double l1 = pt.x;
+    const double l2 = is_uniaxial(pt.load) ? 1.0 / std::sqrt(l1) : pt.lateral_stretch;
+    const double l3 = 1.0 / (l1 * l2);
     double W = 0;
     for (std::size_t k = 0; k < info_.size(); k += 2) {
       const double mu = p[k], al = p[k + 1];
-      W += mu / al * (std::pow(l, al) + 2 * std::pow(l, -al / 2) - 3);
+      W += mu / al * (std::pow(l1, al) + std::pow(l2, al) + std::pow(l3, al) - 3);
     }
     return W;
   }

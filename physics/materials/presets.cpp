@@ -69,6 +69,12 @@ MaterialLibrary parse_material_library(const std::string& text, const std::files
         if (const toml::table* s = (*t)[kind].as_table())
           for (const auto& q : read_named_numbers(*s, nullptr, source, p.id))
             (std::string(kind) == "fit" ? p.fit : p.constants)[q.name] = q.value;
+      if (const auto sm = (*t)["stretch_max"].value<double>()) {
+        p.stretch_max = *sm;
+        if (!(p.stretch_max > 1.0 && p.stretch_max < 10.0))
+          throw CaseFileError("material '" + p.id + "': stretch_max must lie in (1, 10)", source);
+      }
+      p.range_source = (*t)["range_source"].value_or(std::string());
       lib.materials.push_back(std::move(p));
     }
   }

@@ -21,6 +21,10 @@ struct MaterialPreset {
   std::map<std::string, std::vector<MaterialParameter>> spreads;
   std::map<std::string, double> constants;   ///< e.g. blade_speed_m_per_s, bulk_modulus_Pa
   std::map<std::string, double> fit;         ///< printed R², RMSE, seconds
+  /// Top of the stretch range the parameters were calibrated over (0 = not given), and where
+  /// that range comes from. A solver form is fitted over [1, stretch_max] (solver_fit.h).
+  double stretch_max = 0.0;
+  std::string range_source;
 };
 
 /// A printed table of ∂f/∂Ci and σ_T at several stretches (Tables 4.1.2/4.1.3).

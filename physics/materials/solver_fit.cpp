@@ -1,0 +1,279 @@
+// Solver forms of calibrated laws (see solver_fit.h for the method and why).
+
+#include "physics/materials/solver_fit.h"
+
+#include "core/errors.h"
+#include "core/format.h"
+#include "physics/materials/calibration.h"
+
+#include <nlohmann/json.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <limits>
+#include <sstream>
+
+namespace organsmith::physics {
+namespace fs = std::filesystem;
+namespace {
+
+constexpr int kTerms = 3;
+
+bool is_membrane(const std::string& model) { return model == "fung-wall" || model == "fung-organ"; }
+
+/// Internal (Ogden's own) convention of the `ogden` model: T = Σ μp (…), W = Σ μp/αp (…);
+/// the solvers' μi = μp αp / 2.
+SolverMaterial to_solver(const std::vector<double>& p) {
+  SolverMaterial m;
+  for (int k = 0; k < kTerms; ++k) {
+    m.ogden_mu_Pa.push_back(p[2 * k] * p[2 * k + 1] / 2.0);
+    m.ogden_alpha.push_back(p[2 * k + 1]);
+  }
+  return m;
+}
+
+double initial_shear_Pa(const SolverMaterial& m) {
+  double mu0 = 0;
+  for (double mu : m.ogden_mu_Pa) mu0 += mu;
+  return mu0;
+}
+
+/// Bulk modulus of the fung-organ volumetric energy W_vol = K t⁻² [(J−1)² + t (ln J)²]/4
+/// (thesis 5.1.13): d²W_vol/dJ² at J = 1 is K (2 + 2t)/(4 t²) = K (1 + t)/(2 t²).
+double fung_organ_bulk_Pa(double K, double t) { return K * (1.0 + t) / (2.0 * t * t); }
+
+}  // namespace
+
+double ogden_nominal_Pa(const SolverMaterial& m, double l, bool equibiaxial) {
+  const double l3 = equibiaxial ? 1.0 / (l * l) : 1.0 / std::sqrt(l);
+  double T = 0;
+  for (std::size_t k = 0; k < m.ogden_mu_Pa.size(); ++k) {
+    const double a = m.ogden_alpha[k];
+    T += 2.0 * m.ogden_mu_Pa[k] / a * (std::pow(l, a) - std::pow(l3, a)) / l;
+  }
+  return T;
+}
+
+std::vector<LawCurve> law_curves(const RegionLaw& law, int samples) {
+  if (law.material.model == "kelvin-cutting")
+    throw UsageError("material '" + law.id + "' is the kelvin-cutting force law, not a continuum law",
+                     "give a region a stress–stretch law (fung-wall, fung-organ, mooney-rivlin, ogden, artery-logpoly)");
+  if (!(law.stretch_max > 1.0))
+    throw InputError(ExitCode::calibration_data, "material '" + law.id + "' has no calibrated stretch range", {},
+                     "give the preset a stretch_max, or calibrate it from data");
+  const auto model = make_model(law.material.model, law.options);
+  const std::vector<double> p = parameter_values(*model, law.material.parameters);
+  std::vector<LawCurve> curves;
+  auto add = [&](std::string name, LoadCase load, bool equi) {
+    LawCurve c;
+    c.name = std::move(name);
+    c.load = load;
+    c.equibiaxial = equi;
+    for (int i = 1; i <= samples; ++i) {
+      const double l = 1.0 + (law.stretch_max - 1.0) * i / samples;
+      LoadPoint pt{l, equi ? l : 1.0, load};
+      const double T = model->respond_one(pt, p);
+      if (!std::isfinite(T) || T <= 0)
+        throw InputError(ExitCode::calibration_data,
+                         "material '" + law.id + "': the law gives no positive " + c.name + " stress at stretch " + format_g(l),
+                         {}, "its parameters do not describe a tissue in tension over [1, " + format_g(law.stretch_max) + "]");
+      if (!c.nominal_stress_Pa.empty() && T <= c.nominal_stress_Pa.back())
+        throw InputError(ExitCode::calibration_data,
+                         "material '" + law.id + "' is not stable over its range: its " + c.name + " stress falls from " +
+                             format_g(c.nominal_stress_Pa.back(), 4) + " Pa at stretch " + format_g(c.stretch.back(), 4) +
+                             " to " + format_g(T, 4) + " Pa at " + format_g(l, 4),
+                         {}, "no stable solid reproduces a falling stress; recalibrate the law or give the region another");
+      c.stretch.push_back(l);
+      c.nominal_stress_Pa.push_back(T);
+    }
+    curves.push_back(std::move(c));
+  };
+  if (is_membrane(law.material.model)) {
+    // The membrane laws were calibrated on uniaxial strips cut in both directions (thesis
+    // §5.1.2). An isotropic solid cannot follow both when a1 ≠ a2, so it is fitted to their mean
+    // and each direction is compared. Their equibiaxial response is the law's extrapolation (no
+    // biaxial test), with an exponent a1 + a2 + 2 a4 about three times the uniaxial one: compared,
+    // not fitted, since no isotropic solid fitted to the uniaxial data follows it.
+    add("uniaxial circumferential", LoadCase::uniaxial_circumferential, false);
+    add("uniaxial longitudinal", LoadCase::uniaxial_longitudinal, false);
+    LawCurve mean = curves[0];
+    mean.name = "uniaxial, mean of both directions";
+    for (std::size_t i = 0; i < mean.stretch.size(); ++i)
+      mean.nominal_stress_Pa[i] = 0.5 * (curves[0].nominal_stress_Pa[i] + curves[1].nominal_stress_Pa[i]);
+    add("equibiaxial circumferential", LoadCase::biaxial_circumferential, true);
+    add("equibiaxial longitudinal", LoadCase::biaxial_longitudinal, true);
+    for (auto& c : curves) c.fitted = false;
+    curves.insert(curves.begin(), std::move(mean));
+  } else {
+    add("uniaxial", LoadCase::uniaxial_circumferential, false);
+  }
+  return curves;
+}
+
+SolverFit fit_solver_material(const RegionLaw& law, const SolverFitOptions& o) {
+  SolverFit out;
+  out.curves = law_curves(law, o.samples);
+  // Every path becomes calibration data for the incompressible Ogden model (biaxial rows carry
+  // their lateral stretch), with relative residuals so that small and large stretches count alike.
+  CalibrationData data;
+  for (const auto& c : out.curves)
+    for (std::size_t i = 0; i < c.stretch.size() && c.fitted; ++i) {
+      data.points.push_back({c.stretch[i], c.equibiaxial ? c.stretch[i] : 1.0,
+                             c.equibiaxial ? LoadCase::biaxial_circumferential : LoadCase::uniaxial_circumferential});
+      data.measured.push_back(c.nominal_stress_Pa[i]);
+      data.specimen.push_back(c.name);
+    }
+  data.source = law.id;
+  use_relative_residuals(data, 0.01);
+  ModelOptions mo;
+  mo.ogden_terms = kTerms;
+  const auto ogden = make_model("ogden", mo);
+
+  // Small-strain shear modulus of the law from its first uniaxial sample: T ≈ 3 μ0 (λ − 1).
+  const LawCurve& first = out.curves.front();
+  const double mu0 = std::max(first.nominal_stress_Pa[0] / (3.0 * (first.stretch[0] - 1.0)), 1e-6);
+  std::vector<double> lo, hi;
+  for (int k = 0; k < kTerms; ++k) {
+    lo.insert(lo.end(), {0.0, 0.5});
+    hi.insert(hi.end(), {1.0e4 * mu0 + 1.0e6, 60.0});
+  }
+  // Deterministic starts: exponent triples from mild to steep, μ shared so that Σ μp αp/2 = μ0.
+  const double alpha_starts[][kTerms] = {{2, 8, 20}, {1, 5, 15}, {3, 12, 30}, {2, 16, 45}, {1.5, 6, 25}, {4, 10, 50}};
+  double best_err = std::numeric_limits<double>::infinity();
+  std::vector<double> best;
+  for (const auto& a : alpha_starts) {
+    std::vector<double> start;
+    for (int k = 0; k < kTerms; ++k) start.insert(start.end(), {2.0 * mu0 / (kTerms * a[k]), a[k]});
+    const FitResult r = least_squares(*ogden, data, start, lo, hi, LmOptions{400, 1e-12});
+    double err = 0;
+    for (std::size_t i = 0; i < data.measured.size(); ++i)
+      err = std::max(err, std::abs(r.predicted[i] - data.measured[i]) / data.measured[i]);
+    if (std::isfinite(err) && err < best_err) {
+      best_err = err;
+      best = r.parameters;
+    }
+  }
+  if (best.empty())
+    throw InputError(ExitCode::calibration_data, "material '" + law.id + "': no Ogden solid fits its response", {});
+
+  SolverMaterial& m = out.material;
+  m = to_solver(best);
+  m.law_id = law.id;
+  m.law_model = law.material.model;
+  m.stretch_max = law.stretch_max;
+  m.max_relative_error = 0;
+  for (auto& c : out.curves) {
+    c.max_relative_error = 0;
+    for (std::size_t i = 0; i < c.stretch.size(); ++i) {
+      c.fitted_stress_Pa.push_back(ogden_nominal_Pa(m, c.stretch[i], c.equibiaxial));
+      c.max_relative_error = std::max(c.max_relative_error, std::abs(c.fitted_stress_Pa[i] / c.nominal_stress_Pa[i] - 1));
+    }
+    if (c.fitted) {
+      m.curves += (m.curves.empty() ? "" : ", ") + c.name;
+      m.max_relative_error = std::max(m.max_relative_error, c.max_relative_error);
+    }
+  }
+  if (law.material.model == "fung-organ") {
+    const double t = law.material.parameter("t").value_or(1.0);
+    m.bulk_modulus_Pa = fung_organ_bulk_Pa(law.options.bulk_modulus_Pa, t);
+    m.bulk_source = "d²W_vol/dJ² at J = 1 of the volumetric energy (thesis 5.1.13): K (1 + t)/(2 t²) with K = " +
+                    format_g(law.options.bulk_modulus_Pa) + " Pa, t = " + format_g(t);
+  } else {
+    m.bulk_modulus_Pa = o.bulk_to_shear * initial_shear_Pa(m);
+    m.bulk_source = "K = " + format_g(o.bulk_to_shear) + " μ0 (ν ≈ " +
+                    format_g(std::round(1000 * (3 * o.bulk_to_shear - 2) / (2 * (3 * o.bulk_to_shear + 1))) / 1000) +
+                    "): the law has no volumetric term";
+  }
+  // Stability: every term stiffens (μi αi > 0) and the tangent is positive along every path.
+  bool terms_ok = true;
+  for (std::size_t k = 0; k < m.ogden_mu_Pa.size(); ++k) terms_ok = terms_ok && m.ogden_mu_Pa[k] * m.ogden_alpha[k] >= 0;
+  out.min_tangent_Pa = std::numeric_limits<double>::infinity();
+  for (bool equi : {false, true})
+    for (int i = 0; i <= 200; ++i) {
+      const double l = 1.0 + (law.stretch_max - 1.0) * i / 200.0, h = 1e-6;
+      out.min_tangent_Pa = std::min(out.min_tangent_Pa, (ogden_nominal_Pa(m, l + h, equi) - ogden_nominal_Pa(m, l - h, equi)) / (2 * h));
+    }
+  out.stable = terms_ok && out.min_tangent_Pa > 0 && initial_shear_Pa(m) > 0;
+  if (!out.stable)
+    throw InputError(ExitCode::calibration_data,
+                     "material '" + law.id + "': the fitted Ogden solid is not stable over [1, " + format_g(law.stretch_max) + "]",
+                     {}, "check the law's parameters; a stable law gives a stable fit");
+  std::ostringstream note;
+  note << "Ogden N=3 fitted to " << law.material.model << " (" << law.id << ") over stretch [1, " << format_g(law.stretch_max)
+       << "] (" << m.curves << "); largest relative stress error " << format_g(std::round(best_err * 1e4) / 100) << " %";
+  m.note = note.str();
+  return out;
+}
+
+RegionLaw region_law_from_preset(const MaterialLibrary& lib, const std::string& id) {
+  const MaterialPreset& p = lib.find(id);
+  RegionLaw r;
+  r.id = id;
+  r.material = p.material;
+  r.options = model_options_for(p);
+  r.stretch_max = p.stretch_max;
+  r.range_source = p.range_source;
+  for (const char* kind : {"sd", "imvfosm_sd", "dc_sd"})
+    if (auto it = p.spreads.find(kind); it != p.spreads.end()) {
+      r.sd = it->second;
+      r.sd_kind = kind;
+      break;
+    }
+  return r;
+}
+
+RegionLaw region_law_from_calibration(const fs::path& path) {
+  auto bad = [&](const std::string& what) {
+    return InputError(ExitCode::calibration_data, what, path,
+                      "give the params.json that `organsmith calibrate` wrote (with fit.csv beside it)");
+  };
+  std::ifstream in(path);
+  if (!in) throw InputError(ExitCode::input_not_found, "cannot read the calibration result", path);
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(in);
+  } catch (const std::exception& e) {
+    throw bad(std::string("not JSON: ") + e.what());
+  }
+  if (!j.is_object() || !j.contains("model") || !j.contains("parameters") || !j["parameters"].is_array())
+    throw bad("not a calibration result (no model or parameters)");
+  RegionLaw r;
+  r.id = path.string();
+  r.material.model = j["model"].get<std::string>();
+  r.material.source = "organsmith calibrate, " + path.filename().string();
+  const auto model_check = make_model(r.material.model);  // UsageError for an unknown model
+  for (const auto& q : j["parameters"]) {
+    if (!q.is_object() || !q.contains("name") || !q.contains("value") || !q["value"].is_number())
+      throw bad("a parameter entry lacks name or value");
+    r.material.parameters.push_back({q["name"].get<std::string>(), q["value"].get<double>(), q.value("unit", "")});
+    if (q.contains("standard_error") && q["standard_error"].is_number())
+      r.sd.push_back({q["name"].get<std::string>(), q["standard_error"].get<double>(), q.value("unit", "")});
+  }
+  if (!r.sd.empty()) r.sd_kind = "standard_error";
+  if (j.contains("bulk_modulus_Pa") && j["bulk_modulus_Pa"].is_number()) r.options.bulk_modulus_Pa = j["bulk_modulus_Pa"];
+  if (j.contains("stretch_range") && j["stretch_range"].is_array() && j["stretch_range"].size() == 2) {
+    r.stretch_max = j["stretch_range"][1].get<double>();
+    r.range_source = "stretch_range of " + path.filename().string();
+  } else {
+    // Older results: the range of the measured points in fit.csv beside it.
+    const fs::path fit = path.parent_path() / "fit.csv";
+    std::ifstream f(fit);
+    if (!f) throw bad("no stretch_range and no fit.csv beside it to take the calibrated range from");
+    std::string line;
+    std::getline(f, line);
+    double top = 0;
+    while (std::getline(f, line)) {
+      std::stringstream ss(line);
+      std::string cell;
+      for (int c = 0; c < 3 && std::getline(ss, cell, ','); ++c)
+        if (c == 2) top = std::max(top, std::strtod(cell.c_str(), nullptr));
+    }
+    r.stretch_max = top;
+    r.range_source = "largest stretch in " + fit.filename().string();
+  }
+  if (!(r.stretch_max > 1.0 && r.stretch_max < 10.0)) throw bad("the calibrated stretch range does not reach above 1");
+  return r;
+}
+
+}  // namespace organsmith::physics
