@@ -31,6 +31,8 @@ enum class ExitCode : int {
   calibration_data = 21,   ///< calibration/uncertainty data unusable (NaN, too few points, non-monotone stretch)
   mesh_input = 60,         ///< a label map unusable for meshing (empty, organ absent, mask too small)
   mesh_quality = 61,       ///< a mesh failed its quality gate (surface guarantees or tetrahedral quality)
+  solver_not_found = 70,   ///< the finite-element solver (CalculiX ccx) is not installed
+  solver_failed = 71,      ///< the solver stopped without a converged answer (its message is given)
   organ_not_found = 50,    ///< segmentation could not find the organ (no label written)
   bad_seed = 51,           ///< a segmentation seed outside the image or not inside the organ
 };

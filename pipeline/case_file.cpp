@@ -126,7 +126,7 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
   c.source = origin;
   const fs::path base = origin.empty() ? fs::current_path() : fs::absolute(origin).parent_path();
 
-  Table(&root, "top level", origin).only({"case", "phantom", "ingest", "organ", "output", "stages"});
+  Table(&root, "top level", origin).only({"case", "phantom", "ingest", "organ", "output", "stages", "materials"});
 
   Table cs(root["case"].as_table(), "case", origin);
   cs.only({"name", "input", "organs"});
@@ -142,6 +142,38 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
                           origin, "give a TOML file laid out like data/organs.toml, relative to the case file");
     c.registry = parse_organ_registry(*text, c.registry_file, builtin_organ_registry());
     c.registry_toml = *text;
+  }
+  if (const toml::node* mats = root.get("materials")) {
+    // [materials] region = "preset id" | "calibration/params.json": the region's law, replacing
+    // the registry's. Paths are relative to the case file.
+    const toml::table* mt = mats->as_table();
+    fail_if(!mt, "[materials] must be a table of region = \"preset id or params.json\"" + where(*mats), origin,
+            "e.g. [materials] gallbladder_wall = \"my_fit/params.json\"");
+    for (const auto& [key, node] : *mt) {
+      const std::string region(key.str());
+      const auto v = node.value_exact<std::string>();
+      fail_if(!v, "[materials] " + region + " must be a string" + where(node), origin,
+              "a preset id (`organsmith materials`) or the params.json of `organsmith calibrate`");
+      OrganInfo* owner = nullptr;
+      std::string known;
+      for (auto& o : c.registry.organs)
+        for (const auto& r : o.regions()) {
+          known += (known.empty() ? "" : ", ") + r;
+          if (r == region) owner = &o;
+        }
+      fail_if(!owner, "[materials] names region '" + region + "', which no organ has" + where(node), origin,
+              "regions: " + known);
+      std::string ref = *v;
+      if (is_calibration_ref(ref) && fs::path(ref).is_relative()) ref = fs::weakly_canonical(base / ref).string();
+      try {
+        (void)region_law(ref);
+      } catch (const Error& e) {
+        throw CaseFileError("[materials] " + region + ": " + e.message() + where(node), origin,
+                            "give a preset id (`organsmith materials` lists them) or the params.json of `organsmith calibrate`");
+      }
+      owner->materials[region] = ref;
+      c.material_overrides[region] = ref;
+    }
   }
   fail_if(input.empty(), "[case] input is empty", origin,
           "give \"phantom\" or a DICOM directory / NIfTI / NRRD / MHA path");
@@ -224,6 +256,12 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
             "[stages.mesh] wall_mm names '" + organ + "', which is no organ with a wall", origin,
             "organs with a wall have mesh = \"wall_body\" or \"tube\" in the organ registry");
   }
+  for (const auto& [organ, kpa] : c.stages.mesh.pressure_kPa) {
+    const OrganInfo* info = c.registry.find(organ);
+    fail_if(!info || (info->mesh != OrganMeshModel::wall_body && info->mesh != OrganMeshModel::tube),
+            "[stages.mesh] pressure_kPa names '" + organ + "', which is no organ with a lumen", origin,
+            "organs with a lumen have mesh = \"wall_body\" or \"tube\" in the organ registry");
+  }
   if (const toml::table* presets = root["stages"]["segment"]["presets"].as_table()) {
     std::ostringstream ts;
     ts << toml::toml_formatter{*presets};
@@ -301,6 +339,7 @@ nlohmann::json to_json(const CaseFile& c) {
   }
   j["output"] = {{"dir", c.out_dir.string()}};
   if (!c.registry_file.empty()) j["organ_registry"] = c.registry_file.string();
+  if (!c.material_overrides.empty()) j["materials"] = c.material_overrides;
   j["stages"] = nlohmann::json::object();
   for (const auto& stage : configurable_stages()) j["stages"][stage] = stage_json(c, stage);
   return j;

@@ -11,6 +11,7 @@
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -40,6 +41,8 @@ struct CaseFile {
   OrganRegistry registry = builtin_organ_registry();
   std::filesystem::path registry_file;  ///< [case] organs: the case's registry file (empty = none)
   std::string registry_toml;            ///< its text (for the segment stage's presets)
+  /// [materials]: region → preset id or absolute params.json path, already applied to `registry`.
+  std::map<std::string, std::string> material_overrides;
   std::filesystem::path out_dir = "out";
   /// [stages.<stage>]: every stage's typed options (defaults where the case says nothing).
   StageOptions stages;

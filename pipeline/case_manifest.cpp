@@ -55,6 +55,7 @@ CaseFile case_from_manifest(const nlohmann::json& m, const fs::path& manifest_fi
     t["ingest"] = in;
     t["organ"] = c.at("organs");
     t["output"] = c.at("output");
+    if (c.contains("materials")) t["materials"] = c["materials"];
     nlohmann::json stages = c.value("stages", nlohmann::json::object());
     if (stages.contains("segment") && stages["segment"].value("presets", nlohmann::json::object()).empty())
       stages.erase("segment");

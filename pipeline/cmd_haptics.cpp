@@ -138,7 +138,7 @@ struct HapticsFlags {
 /// built-in preset of that region.
 /// The organ region's law as a stress lookup table (the same law the preview and snapshots use).
 StressTable region_table(const fs::path& out, const OrganInfo& organ, const OrganRegistry& registry) {
-  const RegionLaw law = region_law(out, organ.haptic_region, registry);
+  const OutputRegionLaw law = output_region_law(out, organ.haptic_region, registry);
   if (!law.from_output)
     spdlog::warn("haptics: {} not in {}; using the built-in preset {}", organ.haptic_region,
                  OutputLayout{out}.materials().string(), law.preset_id);

@@ -142,6 +142,20 @@ std::string fit_csv(const CalibrationData& d, const FitResult& r, bool cutting) 
 
 // ---- materials ---------------------------------------------------------------------------------
 
+/// `materials --curve REF`: the law as [[stretch, Pa], …] over its calibrated range and its solver fit.
+int run_material_curve(const std::string& ref) {
+  const std::string r = is_calibration_ref(ref) ? fs::absolute(ref).string() : ref;
+  const physics::RegionLaw law = region_law(r);
+  nlohmann::json j = {{is_calibration_ref(r) ? "calibration" : "preset", r},
+                      {"model", law.material.model},
+                      {"stretch_range", {1.0, law.stretch_max}},
+                      {"range_source", law.range_source},
+                      {"uniaxial_curve_pa", uniaxial_curve_json(r)},
+                      {"solver", solver_material_json(r)}};
+  std::cout << j.dump(2) << "\n";
+  return 0;
+}
+
 int run_materials(bool as_json, const std::string& model_filter) {
   const MaterialLibrary lib = builtin_material_library();
   if (as_json) {
@@ -392,7 +406,14 @@ std::vector<Command> physics_commands(CLI::App& app) {
                                                     "source tables), the organ-region assignment and the models' search boxes.");
   materials->add_flag("--json", *materials_json, "print JSON instead of text");
   materials->add_option("--model", *materials_model, "only presets of this model");
-  commands.push_back({materials, [=] { return run_materials(*materials_json, *materials_model); }});
+  auto materials_curve = std::make_shared<std::string>();
+  materials->add_option("--curve", *materials_curve,
+                        "print the law of this preset id (or calibrate params.json) as a uniaxial nominal-stress curve "
+                        "over its calibrated range, with its solver fit, as JSON");
+  commands.push_back({materials, [=] {
+                        if (!materials_curve->empty()) return run_material_curve(*materials_curve);
+                        return run_materials(*materials_json, *materials_model);
+                      }});
 
   // calibrate
   auto cal_model = std::make_shared<ModelFlags>();

@@ -176,7 +176,7 @@ int cmd_preview(const PreviewFlags& f) {
       if (s.name == organ.haptic_surface || best < 0) best = int(i);
     }
     if (best < 0) continue;
-    const RegionLaw law = region_law(out, organ.haptic_region, registry);
+    const OutputRegionLaw law = output_region_law(out, organ.haptic_region, registry);
     surfaces.push_back(os.scene.surfaces[best].mesh);
     tables.push_back(physics::StressTable::from_material(law.material, law.options, organ.haptic_max_strain));
     haptics.contact_scene_surfaces.push_back(best);

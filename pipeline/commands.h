@@ -27,5 +27,7 @@ std::vector<Command> viewer_commands(CLI::App& app);
 std::vector<Command> degradation_commands(CLI::App& app);
 /// `guide`, `haptics` (physics, guidance paths and the force loop; pipeline/cmd_haptics.cpp).
 std::vector<Command> haptics_commands(CLI::App& app);
+/// `simulate` (CalculiX runs of the organs' load cases; pipeline/cmd_simulate.cpp).
+std::vector<Command> simulate_commands(CLI::App& app);
 
 }  // namespace organsmith

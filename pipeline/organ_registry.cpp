@@ -3,10 +3,12 @@
 #include "core/errors.h"
 #include "core/toml_parse.h"
 #include "physics/materials/presets.h"
+#include "physics/materials/solver_fit.h"
 #include "pipeline/stage_options.h"
 #include "segmentation/presets.h"
 
 #include <fstream>
+#include <mutex>
 
 #include <algorithm>
 #include <cmath>
@@ -170,8 +172,12 @@ void parse_organ(const std::string& name, const toml::table& t, OrganInfo& o, co
     o.materials.clear();
     for (const auto& [region, id] : *m) {
       const auto v = id.value_exact<std::string>();
-      if (!v) fail(id, "materials." + std::string(region.str()), "must be a preset id (a string)", "");
-      o.materials[std::string(region.str())] = *v;
+      if (!v) fail(id, "materials." + std::string(region.str()), "must be a preset id or a params.json path (a string)", "");
+      // A calibration result is named relative to the file that names it.
+      o.materials[std::string(region.str())] =
+          is_calibration_ref(*v) && !origin.empty() && fs::path(*v).is_relative()
+              ? fs::weakly_canonical(fs::absolute(origin).parent_path() / *v).string()
+              : *v;
     }
   }
   if (const toml::node* n = t.get("segment"); n && !n->is_table())
@@ -198,10 +204,13 @@ void check_organ(const OrganInfo& o, const fs::path& origin) {
       fail("materials names region '" + region + "', which its mesh model (" +
                std::string(mesh_model_name(o.mesh)) + ") does not have",
            regions.empty() ? "an organ with mesh = \"none\" takes no materials" : "regions: " + list(regions));
-  const physics::MaterialLibrary lib = physics::builtin_material_library();
   for (const auto& [region, id] : o.materials) {
-    const bool known = std::any_of(lib.materials.begin(), lib.materials.end(), [&](const auto& m) { return m.id == id; });
-    if (!known) fail("material '" + id + "' of region " + region + " is not a preset", "`organsmith materials` lists them");
+    try {
+      (void)region_law(id);
+    } catch (const Error& e) {
+      fail("material '" + id + "' of region " + region + ": " + e.message(),
+           "give a preset id (`organsmith materials` lists them) or the params.json of `organsmith calibrate`");
+    }
   }
   if (!o.haptic_surface.empty() && std::find(surfaces.begin(), surfaces.end(), o.haptic_surface) == surfaces.end())
     fail("haptic_surface '" + o.haptic_surface + "' is not one of its surfaces", "surfaces: " + list(surfaces));
@@ -270,28 +279,81 @@ MeshOrganSpec mesh_spec(const OrganInfo& organ, const std::map<std::string, doub
   return s;
 }
 
-std::map<std::string, Material> region_materials(const OrganRegistry& registry) {
-  const physics::MaterialLibrary lib = physics::builtin_material_library();
-  std::map<std::string, Material> out;
+bool is_calibration_ref(const std::string& ref) {
+  return ref.size() > 5 && ref.compare(ref.size() - 5, 5, ".json") == 0;
+}
+
+physics::RegionLaw region_law(const std::string& ref) {
+  static const physics::MaterialLibrary lib = physics::builtin_material_library();
+  if (is_calibration_ref(ref)) return physics::region_law_from_calibration(ref);
+  return physics::region_law_from_preset(lib, ref);
+}
+
+namespace {
+/// Fits are deterministic and take ~50 ms each; one per material reference and process.
+const physics::SolverFit& solver_fit_of(const std::string& ref) {
+  static std::mutex mutex;
+  static std::map<std::string, physics::SolverFit> cache;
+  std::lock_guard lock(mutex);
+  auto it = cache.find(ref);
+  if (it == cache.end()) it = cache.emplace(ref, physics::fit_solver_material(region_law(ref))).first;
+  return it->second;
+}
+}  // namespace
+
+std::map<std::string, SolverMaterial> region_materials(const OrganRegistry& registry) {
+  std::map<std::string, SolverMaterial> out;
   for (const auto& o : registry.organs)
-    for (const auto& [region, id] : o.materials) out[region] = lib.find(id).material;
+    for (const auto& [region, ref] : o.materials) out[region] = solver_fit_of(ref).material;
   return out;
 }
 
+nlohmann::json solver_material_json(const std::string& ref) {
+  const physics::SolverFit& f = solver_fit_of(ref);
+  const SolverMaterial& m = f.material;
+  nlohmann::json curves = nlohmann::json::array();
+  for (const auto& c : f.curves)
+    curves.push_back({{"path", c.name}, {"fitted", c.fitted}, {"max_relative_error", c.max_relative_error}});
+  return {{"form", "ogden"},
+          {"convention", "W = sum 2 mu_i/alpha_i^2 (l1^alpha_i + l2^alpha_i + l3^alpha_i - 3) + (J - 1)^2 / D1, D1 = 2/K"},
+          {"mu_Pa", m.ogden_mu_Pa},
+          {"alpha", m.ogden_alpha},
+          {"bulk_modulus_Pa", m.bulk_modulus_Pa},
+          {"bulk_source", m.bulk_source},
+          {"stretch_range", {1.0, m.stretch_max}},
+          {"fitted_to", m.curves},
+          {"max_relative_error", m.max_relative_error},
+          {"paths", curves},
+          {"min_tangent_Pa", f.min_tangent_Pa}};
+}
+
+nlohmann::json uniaxial_curve_json(const std::string& ref) {
+  const physics::SolverFit& f = solver_fit_of(ref);
+  const physics::LawCurve& c = f.curves.front();  // the isotropic or direction-mean uniaxial path
+  nlohmann::json pts = nlohmann::json::array({{1.0, 0.0}});
+  for (std::size_t i = 0; i < c.stretch.size(); ++i) pts.push_back({c.stretch[i], c.nominal_stress_Pa[i]});
+  return pts;
+}
+
 nlohmann::json materials_json_for(const OrganRegistry& registry, const std::vector<std::string>& organs) {
-  const physics::MaterialLibrary lib = physics::builtin_material_library();
   nlohmann::json regions = nlohmann::json::object();
   for (const auto& name : organs) {
-    for (const auto& [region, preset_id] : registry.at(name).materials) {
-      const physics::MaterialPreset& preset = lib.find(preset_id);
+    for (const auto& [region, ref] : registry.at(name).materials) {
+      const physics::RegionLaw law = region_law(ref);
       nlohmann::json params = nlohmann::json::array();
-      for (const auto& p : preset.material.parameters)
+      for (const auto& p : law.material.parameters)
         params.push_back({{"name", p.name}, {"value", p.value}, {"unit", p.unit}});
-      regions[region] = {{"preset", preset_id},
-                         {"model", preset.material.model},
-                         {"parameters", params},
-                         {"constants", preset.constants},
-                         {"source", preset.material.source}};
+      nlohmann::json r = {{is_calibration_ref(ref) ? "calibration" : "preset", ref},
+                          {"model", law.material.model},
+                          {"parameters", params},
+                          {"source", law.material.source},
+                          {"stretch_range", {1.0, law.stretch_max}},
+                          {"range_source", law.range_source}};
+      if (law.material.model == "fung-organ") r["constants"] = {{"bulk_modulus_Pa", law.options.bulk_modulus_Pa}};
+      r["uniaxial_curve_pa"] = uniaxial_curve_json(ref);
+      r["uniaxial_curve_path"] = solver_fit_of(ref).curves.front().name;
+      r["solver"] = solver_material_json(ref);
+      regions[region] = r;
     }
   }
   return {{"regions", regions}};

@@ -5,6 +5,7 @@
 
 #include "core/material.h"
 #include "meshing/mesh.h"
+#include "physics/materials/solver_fit.h"
 
 #include <nlohmann/json.hpp>
 
@@ -83,11 +84,24 @@ OrganRegistry registry_of_output(const std::filesystem::path& out_dir);
 /// What the mesh stage needs of an organ; `wall_mm` overrides the registry's wall per organ.
 MeshOrganSpec mesh_spec(const OrganInfo& organ, const std::map<std::string, double>& wall_mm = {});
 
-/// The material of every tet region of the registry's organs (for the solver exports).
-std::map<std::string, Material> region_materials(const OrganRegistry& registry);
+/// A region's law from its material reference: a preset id of data/materials.toml, or the
+/// path of an `organsmith calibrate` params.json (ends in ".json"). UsageError / InputError
+/// naming what is wrong.
+physics::RegionLaw region_law(const std::string& ref);
+bool is_calibration_ref(const std::string& ref);
 
-/// materials.json of the attach stage: per region of `organs`, its preset, model, parameters
-/// with units, constants and source.
+/// The solver material of every tet region of the registry's organs: the Ogden form fitted to
+/// the region's calibrated law (physics/materials/solver_fit.h).
+std::map<std::string, SolverMaterial> region_materials(const OrganRegistry& registry);
+
+/// The solver fit of a material reference as JSON (coefficients, range, errors), and the law
+/// itself sampled as a uniaxial nominal-stress curve [[stretch, Pa], …] over its range.
+nlohmann::json solver_material_json(const std::string& ref);
+nlohmann::json uniaxial_curve_json(const std::string& ref);
+
+/// materials.json of the attach stage: per region of `organs`, its preset (or calibration),
+/// model, parameters with units, calibrated range, the law as a uniaxial curve and its solver
+/// fit.
 nlohmann::json materials_json_for(const OrganRegistry& registry, const std::vector<std::string>& organs);
 
 }  // namespace organsmith

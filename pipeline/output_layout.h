@@ -43,6 +43,13 @@ struct OutputLayout {
     return paths_dir() / (name + "." + ext);
   }
   // snapshot
+  std::filesystem::path simulation_dir() const { return root / "simulation"; }
+  std::filesystem::path simulation(const std::string& organ, const std::string& ext) const {
+    return simulation_dir() / (organ + "." + ext);
+  }
+  /// The solver's own files of an organ's run (input copy, log, .sta, .dat).
+  std::filesystem::path simulation_work(const std::string& organ) const { return simulation_dir() / (organ + "_solver"); }
+
   std::filesystem::path snapshots_dir() const { return root / "snapshots"; }
 };
 

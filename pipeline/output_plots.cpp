@@ -234,11 +234,11 @@ std::vector<Plot> material_plots(const fs::path& out, const OrganRegistry& regis
     pts.push_back({1.0 + (kMaxStretch - 1.0) * i / 60.0, 1.0, physics::LoadCase::uniaxial_circumferential});
   auto positive = [](double v) { return std::isfinite(v) && v > 0; };
   // Regions with identical laws share one curve.
-  std::vector<std::pair<std::vector<std::string>, RegionLaw>> distinct;
+  std::vector<std::pair<std::vector<std::string>, OutputRegionLaw>> distinct;
   for (const auto& [region, _] : mj["regions"].items()) {
-    RegionLaw law;
+    OutputRegionLaw law;
     try {
-      law = region_law(out, region, registry);
+      law = output_region_law(out, region, registry);
     } catch (const Error& e) {
       spdlog::warn("{}", e.what());
       continue;

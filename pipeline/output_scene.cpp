@@ -64,8 +64,8 @@ Rgb path_colour(const std::string& name) {
 
 }  // namespace
 
-RegionLaw region_law(const fs::path& out, const std::string& region, const OrganRegistry& registry) {
-  RegionLaw law;
+OutputRegionLaw output_region_law(const fs::path& out, const std::string& region, const OrganRegistry& registry) {
+  OutputRegionLaw law;
   const fs::path mf = OutputLayout{out}.materials();
   if (fs::exists(mf)) {
     std::ifstream in(mf);
@@ -94,17 +94,16 @@ RegionLaw region_law(const fs::path& out, const std::string& region, const Organ
       return law;
     }
   }
-  const physics::MaterialLibrary lib = physics::builtin_material_library();
   std::string preset_id;
   for (const auto& o : registry.organs)
     if (const auto it = o.materials.find(region); it != o.materials.end()) preset_id = it->second;
   if (preset_id.empty())
     throw InputError(ExitCode::unsupported_input, "no material for region " + region, mf,
                      "run the attach stage, or see `organsmith materials` for the regions");
-  const physics::MaterialPreset& preset = lib.find(preset_id);
-  law.material = preset.material;
-  law.options = physics::model_options_for(preset);
-  law.preset_id = preset.id;
+  const physics::RegionLaw r = region_law(preset_id);
+  law.material = r.material;
+  law.options = r.options;
+  law.preset_id = preset_id;
   return law;
 }
 

@@ -53,13 +53,13 @@ struct LoadFlags {
 /// The calibrated law of an organ region ("gallbladder_body", "trachea_wall", …): from
 /// OUT/materials.json (the attach stage) when it has the region, else the built-in preset the
 /// region is assigned to. Throws InputError when materials.json is malformed or no law exists.
-struct RegionLaw {
+struct OutputRegionLaw {
   Material material;
   physics::ModelOptions options;
   std::string preset_id;     ///< the preset it came from (as materials.json records it)
   bool from_output = false;  ///< true: read from OUT/materials.json
 };
-RegionLaw region_law(const std::filesystem::path& out, const std::string& region, const OrganRegistry& registry);
+OutputRegionLaw output_region_law(const std::filesystem::path& out, const std::string& region, const OrganRegistry& registry);
 
 /// Fills `os` from the output directory `out`; what is missing is listed in os.missing.
 void load_output_scene(const std::filesystem::path& out, const LoadFlags& flags, OutputScene& os,

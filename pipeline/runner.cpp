@@ -18,6 +18,7 @@
 #include "meshing/mesh.h"
 #include "physics/haptics/contact.h"
 #include "physics/materials/presets.h"
+#include "pipeline/simulate.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/output_layout.h"
 #include "pipeline/output_scene.h"
@@ -154,7 +155,10 @@ class Runner {
       execute({"segment", fingerprint("segment", seg_opts.dump() + registry_digest() + outputs_digest("ingest")),
                [&](const fs::path& staging) { write_segmentation(staging); }});
       const nlohmann::json mesh_opts = stage_json(case_, "mesh");
-      execute({"mesh", fingerprint("mesh", mesh_opts.dump() + registry_digest() + outputs_digest("segment")),
+      // The solver files carry each region's fitted material, so the materials are part of the mesh
+      // stage's fingerprint.
+      execute({"mesh", fingerprint("mesh", mesh_opts.dump() + registry_digest() + materials_json().dump() +
+                                               outputs_digest("segment")),
                [&](const fs::path& staging) { write_meshes(staging); }});
       execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
                [&](const fs::path& staging) {
@@ -164,6 +168,10 @@ class Runner {
       execute({"guide", fingerprint("guide", stage_json(case_, "guide").dump() + outputs_digest("phantom") +
                                                  outputs_digest("segment") + outputs_digest("mesh")),
                [&](const fs::path& staging) { write_paths(staging); }});
+      // simulate: the organs' load cases in CalculiX (on request: minutes per organ).
+      if (case_.stages.simulate.enabled || options_.from == "simulate" || options_.until == "simulate")
+        execute({"simulate", fingerprint("simulate", stage_json(case_, "simulate").dump() + outputs_digest("mesh")),
+                 [&](const fs::path& staging) { write_simulations(staging); }});
     }
     const nlohmann::json snap_opts = stage_json(case_, "snapshot");
     execute({"snapshot",
@@ -198,12 +206,67 @@ class Runner {
     ex.formats = mo.formats;
     ex.ras = mo.ras;
     ex.materials = region_materials(case_.registry);
+    ex.quadratic = !mo.linear_tets;
+    for (const auto& spec : options.organs) {
+      SolverScenario sc = default_scenario(spec);
+      if (const auto it = mo.pressure_kPa.find(spec.name); it != mo.pressure_kPa.end()) sc.pressure_kPa = it->second;
+      ex.scenarios[spec.name] = sc;
+    }
     std::vector<std::string> warnings;
     const OutputLayout staged{staging};
     fs::create_directories(staged.meshes_dir());
     export_meshes(meshes, staged.meshes_dir(), ex, &warnings);
     for (const auto& w : warnings) spdlog::warn("mesh: {}", w);
     meshes_ = std::move(meshes);
+  }
+
+  /// simulate runs every organ's exported load case (meshes/<organ>/<organ>.inp) in CalculiX and
+  /// writes simulation/<organ>.vtu and .json; the solver's log and tables stay in
+  /// simulation/<organ>_solver/.
+  void write_simulations(const fs::path& staging) {
+    const OutputLayout staged{staging};
+    SimulateOptions so;
+    so.threads = case_.stages.simulate.threads;
+    so.timeout_s = case_.stages.simulate.timeout_s;
+    if (const char* ccx = std::getenv("ORGANSMITH_CCX"); ccx && *ccx) so.solver = ccx;
+    int ran = 0;
+    for (const auto& o : case_.organs) {
+      const OrganInfo& info = case_.registry.at(o.name);
+      if (info.mesh != OrganMeshModel::wall_body && info.mesh != OrganMeshModel::tube) continue;
+      const auto& only = case_.stages.simulate.organs;
+      if (!only.empty() && std::find(only.begin(), only.end(), o.name) == only.end()) {
+        // Not asked for this time: its earlier results stay (carried into the new commit).
+        for (const fs::path& f : {layout_.simulation(o.name, "json"), layout_.simulation(o.name, "vtu")})
+          if (fs::exists(f)) {
+            fs::create_directories(staged.simulation_dir());
+            fs::copy_file(f, staged.simulation_dir() / f.filename());
+          }
+        if (fs::is_directory(layout_.simulation_work(o.name)))
+          fs::copy(layout_.simulation_work(o.name), staged.simulation_work(o.name), fs::copy_options::recursive);
+        continue;
+      }
+      const fs::path inp = layout_.volume(o.name, "inp");
+      if (!fs::exists(inp)) {
+        spdlog::warn("simulate: {} has no solver input ({}); add \"inp\" to [stages.mesh] formats", o.name, inp.string());
+        continue;
+      }
+      if (!has_load_case(read_solver_inp(inp))) {
+        spdlog::warn("simulate: {} has no load step in {} (its comments say why); skipped", o.name, inp.string());
+        continue;
+      }
+      const fs::path work = staged.simulation_work(o.name);
+      Simulation sim = simulate_inp(inp, work, so, progress_);
+      // Keep the solver's account (log, status, printed totals), not its bulky result file.
+      for (const char* f : {"job.frd", "job.cvg", "job.12d", "spooles.out"}) fs::remove(work / f);
+      write_simulation_files(sim.input, sim.frd, sim.result, staged.simulation_dir());
+      const auto& r = sim.result;
+      spdlog::info("simulate: {}: converged in {} increments, {:.1f} s; largest displacement {:.3g} mm, von Mises "
+                   "{:.3g} Pa; reaction balance {:.2g} %",
+                   o.name, r.increments, r.solver_seconds, r.max_displacement_mm, r.max_von_mises_Pa,
+                   100 * r.balance_error);
+      ++ran;
+    }
+    if (ran == 0) spdlog::warn("simulate: no organ with a load case (gallbladder or trachea) in this case");
   }
 
   /// The segmentation: this run's, else read from labels.nii.gz (its reader).
@@ -523,7 +586,8 @@ fs::path make_staging_dir(const fs::path& final_path) {
 void write_text_atomic(const fs::path& path, const std::string& text) { write_file_atomic(path, text); }
 
 const std::vector<std::string>& stage_names() {
-  static const std::vector<std::string> names = {"phantom", "ingest", "segment", "mesh", "attach", "guide", "snapshot"};
+  static const std::vector<std::string> names = {"phantom", "ingest", "segment", "mesh", "attach", "guide", "simulate",
+                                                  "snapshot"};
   return names;
 }
 

@@ -44,6 +44,16 @@ void visit(Visitor& v, MeshStageOptions& o) {
   v.boolean("ras", o.ras, "write RAS instead of LPS coordinates");
   v.choice("quality_gate", o.quality_gate, {"report", "enforce"},
            "a mesh missing its quality gate: report (warn, quality.json) or enforce (stop, exit 61)");
+  v.boolean("linear_tets", o.linear_tets, "linear tetrahedra (C3D4/tet4) instead of quadratic (C3D10/tet10)");
+  v.per_organ("pressure_kPa", o.pressure_kPa, 0.0, 100.0, "kPa",
+              "lumen pressure of the organ's load step, e.g. { trachea = 1.0 }; {} = gallbladder 1.5, trachea 2.0");
+}
+
+void visit(Visitor& v, SimulateStageOptions& o) {
+  v.boolean("enabled", o.enabled, "run the organs' load cases in CalculiX during `run`");
+  v.subset("organs", o.organs, {"gallbladder", "trachea"}, "organs to simulate; [] = every organ with a load case");
+  v.integer("threads", o.threads, 0, 1024, "solver threads; 0 = every core");
+  v.number("timeout_s", o.timeout_s, 0.0, 1.0e6, "s", "stop a solver run after this long; 0 = no limit");
 }
 
 void visit(Visitor& v, GuideStageOptions& o) {
@@ -68,6 +78,7 @@ void for_each_stage(StageOptions& o, F&& f) {
   f("mesh", [&](Visitor& v) { visit(v, o.mesh); });
   f("attach", nullptr);
   f("guide", [&](Visitor& v) { visit(v, o.guide); });
+  f("simulate", [&](Visitor& v) { visit(v, o.simulate); });
   f("snapshot", [&](Visitor& v) { visit(v, o.snapshot); });
 }
 
@@ -238,7 +249,7 @@ class TomlWriter final : public Visitor {
 }  // namespace
 
 const std::vector<std::string>& configurable_stages() {
-  static const std::vector<std::string> names = {"segment", "mesh", "attach", "guide", "snapshot"};
+  static const std::vector<std::string> names = {"segment", "mesh", "attach", "guide", "simulate", "snapshot"};
   return names;
 }
 

@@ -26,7 +26,20 @@ struct MeshStageOptions {
   /// "report": a mesh missing its quality gate is written with warnings and quality.json says
   /// which figure failed; "enforce": the run stops with exit 61 (as `organsmith mesh` does).
   std::string quality_gate = "report";
+  /// Linear tetrahedra (C3D4 / tet4) in the volume files instead of quadratic ones (default false).
+  bool linear_tets = false;
+  /// Lumen pressure of an organ's load step in the solver files, kPa, e.g. { trachea = 1.0 }; an
+  /// organ not named keeps its default (gallbladder 1.5, trachea 2.0).
+  std::map<std::string, double> pressure_kPa;
   MeshStageOptions();
+};
+
+/// [stages.simulate]: the organs' load cases in CalculiX.
+struct SimulateStageOptions {
+  bool enabled = false;   ///< run the stage in `run` (default false: minutes per organ at 1.5 mm edges)
+  std::vector<std::string> organs;  ///< organs to simulate; [] = every organ with a load case (default)
+  int threads = 0;        ///< solver threads; 0 = every core (default 0)
+  double timeout_s = 0;   ///< stop a solver run after this many seconds; 0 = no limit (default 0)
 };
 
 /// [stages.snapshot]: the review pictures.
@@ -40,6 +53,7 @@ struct SnapshotStageOptions {
 struct StageOptions {
   MeshStageOptions mesh;
   GuideStageOptions guide;
+  SimulateStageOptions simulate;
   SnapshotStageOptions snapshot;
 };
 

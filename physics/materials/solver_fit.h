@@ -48,9 +48,9 @@ struct RegionLaw {
 
 struct SolverFitOptions {
   int samples = 24;             ///< stretches per loading path, evenly spaced in (1, stretch_max]
-  /// K/μ0 for laws without a volumetric term: 100 gives ν ≈ 0.495 (nearly incompressible soft
-  /// tissue) while keeping quadratic tetrahedra free of locking.
-  double bulk_to_shear = 100.0;
+  /// K over the largest tangent shear modulus of the fitted response over the range: the solid
+  /// stays nearly incompressible (ν ≥ 0.49) up to the top of the range, as the fit assumes.
+  double bulk_to_shear = 50.0;
 };
 
 /// The fit and the law it came from.

@@ -47,15 +47,20 @@ for organ_dir in sorted(glob.glob(os.path.join(root, "*"))):
             failures.append(f"{vtu}: region_id cell data missing")
         for path in (vtu, stem + ".msh", stem + ".v22.msh", stem + ".inp"):
             m = meshio.read(path, file_format="abaqus" if path.endswith(".inp") else None)
-            if (len(m.points), cells(m, "tetra")) != (n_pts, n_tet):
-                failures.append(f"{path}: meshio sees {len(m.points)} points, {cells(m, 'tetra')} tets; VTK sees {n_pts}, {n_tet}")
+            tets = cells(m, "tetra") + cells(m, "tetra10")
+            if (len(m.points), tets) != (n_pts, n_tet):
+                failures.append(f"{path}: meshio sees {len(m.points)} points, {tets} tets; VTK sees {n_pts}, {n_tet}")
         for path in (stem + ".msh", stem + ".v22.msh"):
             out = subprocess.run(["gmsh", "-check", path], capture_output=True, text=True)
             text = out.stdout + out.stderr
             if out.returncode != 0 or "Error" in text:
                 failures.append(f"gmsh -check {path}: exit {out.returncode}\n{text[-2000:]}")
-            elif f"{n_tet} " not in text.replace(",", " ") and str(n_tet) not in text:
-                failures.append(f"gmsh -check {path}: does not report {n_tet} elements\n{text[-2000:]}")
+            else:
+                # gmsh counts every element: the tetrahedra and the triangles of the named surfaces.
+                m = meshio.read(path)
+                total = n_tet + cells(m, "triangle") + cells(m, "triangle6")
+                if f" {total} elements" not in text:
+                    failures.append(f"gmsh -check {path}: does not report {total} elements ({n_tet} tets)\n{text[-2000:]}")
         print(f"{os.path.basename(stem)}: {n_pts} nodes, {n_tet} tets in VTU MSH4.1 MSH2.2 INP (meshio, VTK, gmsh)")
 
 for f in failures:

@@ -419,9 +419,16 @@ TEST_F(PhantomMeshes, ExportsRoundTripThroughIndependentReaders) {
       if (line == "$Nodes") { std::size_t blocks; in >> blocks >> nodes; }
       if (line == "$Elements") { std::size_t blocks; in >> blocks >> elements; }
     }
-    EXPECT_EQ(nodes, gb->volume.vertices_lps_mm.size());
-    EXPECT_EQ(elements, gb->volume.tets.size());
-    EXPECT_EQ(physicals, 2u);
+    // Quadratic tets (10 nodes) by default, plus one tri6 per face of each named surface.
+    const SolverModel sm = build_solver_model(*gb);
+    std::set<std::pair<int, int>> distinct;  // each boundary face once, however many surfaces hold it
+    for (const auto& [name, f] : sm.surfaces)
+      for (const auto& x : f) distinct.insert({x.tet, x.face});
+    const std::size_t faces = distinct.size();
+    EXPECT_EQ(nodes, sm.nodes_lps_mm.size());
+    EXPECT_GT(nodes, gb->volume.vertices_lps_mm.size());
+    EXPECT_EQ(elements, gb->volume.tets.size() + faces);
+    EXPECT_EQ(physicals, 2u + sm.surfaces.size());
   }
   // FEBio 4.0: parsed for the version, one SolidDomain and material per region, counts.
   {
@@ -432,8 +439,11 @@ TEST_F(PhantomMeshes, ExportsRoundTripThroughIndependentReaders) {
       for (auto p = feb.find(needle); p != std::string::npos; p = feb.find(needle, p + 1)) ++n;
       return n;
     };
-    EXPECT_EQ(count("<node id="), gb->volume.vertices_lps_mm.size());
+    const SolverModel sm = build_solver_model(*gb);
+    EXPECT_EQ(count("<node id="), sm.nodes_lps_mm.size());
     EXPECT_EQ(count("<elem id="), gb->volume.tets.size());
+    EXPECT_EQ(count("<Elements type=\"tet10\""), 2u);
+    EXPECT_EQ(count("<Surface name="), sm.surfaces.size());
     EXPECT_EQ(count("<SolidDomain "), 2u);
     EXPECT_EQ(count("<material id="), 2u);
   }
@@ -445,6 +455,25 @@ TEST_F(PhantomMeshes, ExportsRoundTripThroughIndependentReaders) {
   const std::string log = organsmith::testing::read_file(dir.path() / "readers.log");
   if (WEXITSTATUS(rc) == 77) GTEST_SKIP() << "independent readers not installed: " << log;
   EXPECT_EQ(WEXITSTATUS(rc), 0) << log;
+
+  // FEBio 4.0 format rules (FEBio is not in Debian: structure-checked, not solved). The checker
+  // must also catch a broken file: the same FEB with its load's surface renamed away.
+  const std::string feb_check = std::string(ORGANSMITH_SOURCE_DIR) + "/tests/meshing/check_feb.py";
+  const fs::path gb_feb = dir.path() / "gallbladder" / "gallbladder.feb", tr_feb = dir.path() / "trachea" / "trachea.feb";
+  const int feb_rc = std::system(("/usr/bin/python3 " + feb_check + " " + gb_feb.string() + " " + tr_feb.string() + " > " +
+                                  (dir.path() / "feb.log").string() + " 2>&1").c_str());
+  EXPECT_EQ(WEXITSTATUS(feb_rc), 0) << organsmith::testing::read_file(dir.path() / "feb.log");
+  std::string broken = organsmith::testing::read_file(gb_feb);
+  const auto at = broken.find("<Surface name=\"gallbladder_lumen\">");
+  ASSERT_NE(at, std::string::npos);
+  broken.replace(at, 34, "<Surface name=\"somewhere_else\">");
+  {
+    std::ofstream b(dir.path() / "broken.feb");
+    b << broken;
+  }
+  const int broken_rc = std::system(("/usr/bin/python3 " + feb_check + " " + (dir.path() / "broken.feb").string() + " > " +
+                                     (dir.path() / "broken.log").string() + " 2>&1").c_str());
+  EXPECT_EQ(WEXITSTATUS(broken_rc), 1) << organsmith::testing::read_file(dir.path() / "broken.log");
 }
 
 // Two calls in one process: the second sees a different heap, so any ordering that follows

@@ -1,0 +1,90 @@
+#pragma once
+// An organ's tetrahedral mesh as a solver takes it: linear or quadratic tetrahedra, named node
+// sets and element-face surfaces for boundary conditions, and the organ's default load case.
+// One model feeds every solver writer (INP, FEB, MSH, VTU), so the names and numbering agree.
+//
+// Node order of a quadratic tetrahedron (CalculiX C3D10, Abaqus, FEBio tet10, VTK 24):
+// corners 0–3, then mid-edge nodes on edges 0-1, 1-2, 2-0, 0-3, 1-3, 2-3. Corners are oriented so
+// that (x1 − x0) × (x2 − x0) · (x3 − x0) > 0. Faces are numbered as CalculiX's S1–S4:
+// {0,1,2}, {0,3,1}, {1,3,2}, {2,3,0}; each face's node order makes its normal point into the
+// element, so a positive pressure on it pushes into that element.
+//
+// Surfaces (names prefixed by the organ):
+//   wall_body (gallbladder): <organ>_outer (the organ's boundary), <organ>_lumen (the wall's
+//     inner face, where wall meets body; faces of wall elements) and <organ>_liver_bed (the part of
+//     the outer surface facing the liver: within `bed_distance_mm` of a liver voxel when a liver
+//     mask is given, else whose outward normal lies within `bed_angle_deg` of `bed_direction_lps`;
+//     the largest connected patch).
+//   tube (trachea): <organ>_outer, <organ>_lumen, <organ>_cranial and <organ>_caudal (the flat
+//     cut faces at the top and bottom of the tube).
+//   solid: <organ>_outer.
+// Each surface also has a node set <surface>_nodes; each region a node set <region>_nodes.
+
+#include "core/geometry.h"
+#include "meshing/mesh.h"
+
+#include <Eigen/Core>
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace organsmith {
+
+/// The organ's default analysis (thesis §5.1.1; §5.2.1): a fixed surface and a pressure on
+/// another, in a nonlinear static step.
+struct SolverScenario {
+  std::string fixed_surface;      ///< suffix of the fixed surface ("liver_bed", "cuts")
+  std::string pressure_surface;   ///< suffix of the loaded surface ("lumen")
+  double pressure_kPa = 0.0;      ///< uniform pressure; positive inflates the lumen
+  /// Regions that carry no load in this scenario (the gallbladder body: the bile's pressure acts
+  /// on the wall). Written as a *MODEL CHANGE removal in the step.
+  std::vector<std::string> inactive_regions;
+};
+
+struct SolverModelOptions {
+  bool quadratic = true;
+  Eigen::Vector3d bed_direction_lps{-0.3, 0.0, 1.0};
+  double bed_angle_deg = 60.0;
+  double bed_distance_mm = 2.0;
+  /// Distance (mm) from a point to the nearest liver voxel, when a liver label exists.
+  std::function<double(const Eigen::Vector3d&)> liver_distance_mm;
+};
+
+struct SolverFace {
+  std::int32_t tet = 0;   ///< element index (0-based)
+  std::int32_t face = 0;  ///< 0–3 = CalculiX S1–S4
+};
+
+struct SolverModel {
+  std::string organ;
+  bool quadratic = true;
+  std::vector<Eigen::Vector3d> nodes_lps_mm;      ///< corners first, then mid-edge nodes
+  std::vector<std::array<std::int32_t, 10>> elements;  ///< 4 or 10 nodes used (see quadratic)
+  std::vector<std::int32_t> region_ids;           ///< per element
+  std::map<std::int32_t, std::string> region_names;
+  std::map<std::string, std::vector<SolverFace>> surfaces;
+  std::map<std::string, std::vector<std::int32_t>> node_sets;   ///< sorted, 0-based
+  std::vector<std::string> notes;                 ///< how surfaces were found (for file comments)
+
+  int nodes_per_element() const { return quadratic ? 10 : 4; }
+  /// Node ids (0-based) of face `f` of element `e`: 3 corners, then (quadratic) the 3 mid-edge
+  /// nodes of edges (0,1), (1,2), (2,0) of the face.
+  std::vector<std::int32_t> face_nodes(const SolverFace& f) const;
+  /// Area vector of a face (mm², pointing out of its element).
+  Eigen::Vector3d face_area_out_mm2(const SolverFace& f) const;
+};
+
+/// Builds the solver model of one organ. Throws MeshInputError when the organ has no tets or a
+/// surface its model needs cannot be found (naming which).
+SolverModel build_solver_model(const OrganMesh& organ, const SolverModelOptions& options = {});
+
+/// The default scenario of an organ model: wall_body → liver bed fixed, 1.5 kPa in the lumen
+/// (biliary pressure), body inactive; tube → both cut faces fixed, 2 kPa in the lumen (airway
+/// pressure in ventilation); solid → none (empty fixed_surface).
+SolverScenario default_scenario(const MeshOrganSpec& spec);
+
+}  // namespace organsmith

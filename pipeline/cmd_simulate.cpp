@@ -1,0 +1,84 @@
+// `organsmith simulate OUT_DIR`: the simulate stage of a run's directory (see pipeline/simulate.h).
+
+#include "pipeline/case_file.h"
+#include "pipeline/commands.h"
+#include "pipeline/output_layout.h"
+#include "pipeline/runner.h"
+#include "pipeline/terminal_progress.h"
+
+#include <nlohmann/json.hpp>
+
+#include <cstdlib>
+#include <fstream>
+#include <iostream>
+#include <memory>
+
+namespace organsmith {
+namespace fs = std::filesystem;
+
+namespace {
+
+struct SimulateArgs {
+  std::string out;
+  std::vector<std::string> organs;
+  std::string solver = "ccx";
+  int threads = -1;
+  double timeout_s = -1;
+};
+
+int cmd_simulate(const SimulateArgs& a) {
+  const fs::path out = fs::absolute(a.out);
+  std::error_code ec;
+  if (!fs::is_directory(out, ec))
+    throw InputError(ExitCode::input_not_found, "no such output directory", out, "run `organsmith run --out " + a.out + "` first");
+  std::optional<CaseFile> c = case_of_run(out);
+  if (!c)
+    throw InputError(ExitCode::input_not_found, "this directory holds no run (no manifest with a case)", out,
+                     "simulate works on the output of `organsmith run` (or segment then mesh)");
+  // The solver executable: `ccx` on PATH, or the CalculiX binary named here (passed to the stage
+  // as ORGANSMITH_CCX, which a user may also set).
+  if (a.solver != "ccx") setenv("ORGANSMITH_CCX", a.solver.c_str(), 1);
+  if (!a.organs.empty()) c->stages.simulate.organs = a.organs;
+  if (a.threads >= 0) c->stages.simulate.threads = a.threads;
+  if (a.timeout_s >= 0) c->stages.simulate.timeout_s = a.timeout_s;
+  RunOptions ro;
+  ro.from = "simulate";
+  ro.until = "simulate";
+  TerminalProgress progress;
+  const RunSummary summary = run_case(*c, ro, progress);
+  progress.finish();
+  const OutputLayout layout{out};
+  for (const auto& o : c->organs) {
+    const fs::path j = layout.simulation(o.name, "json");
+    std::ifstream in(j);
+    if (!in) continue;
+    const nlohmann::json r = nlohmann::json::parse(in);
+    std::cout << o.name << ": converged in " << r["increments"] << " increments, " << r["max_displacement_mm"]
+              << " mm largest displacement, " << r["max_von_mises_Pa"] << " Pa largest von Mises stress, reaction balance "
+              << r["reaction_balance_error"] << "\n  " << j.string() << "\n";
+  }
+  (void)summary;
+  return 0;
+}
+
+}  // namespace
+
+std::vector<Command> simulate_commands(CLI::App& app) {
+  auto a = std::make_shared<SimulateArgs>();
+  auto* cmd = app.add_subcommand(
+      "simulate",
+      "Run each organ's load case (meshes/<organ>/<organ>.inp: gallbladder — liver bed fixed, bile\n"
+      "pressure in the lumen; trachea — both cut ends fixed, airway pressure in the lumen) in CalculiX\n"
+      "(Debian package calculix-ccx) and write simulation/<organ>.vtu (displacement, von Mises stress)\n"
+      "and simulation/<organ>.json (convergence, increments, solver time, reaction balance, largest\n"
+      "displacement and stress, lumen volume change). Exit 70: no solver; 71: no converged answer.");
+  cmd->add_option("OUT_DIR", a->out, "output directory of `organsmith run`")->required();
+  cmd->add_option("--organ", a->organs, "organ to simulate (repeatable; default: every organ with a load case)");
+  cmd->add_option("--solver", a->solver, "CalculiX executable (default: ccx on PATH, or $ORGANSMITH_CCX)");
+  cmd->add_option("--threads", a->threads, "solver threads (default: the case's, 0 = every core)")->check(CLI::Range(0, 1024));
+  cmd->add_option("--timeout-s", a->timeout_s, "stop a solver run after this many seconds (default: none)")
+      ->check(CLI::Range(0.0, 1.0e6));
+  return {{cmd, [a] { return cmd_simulate(*a); }}};
+}
+
+}  // namespace organsmith

@@ -1,0 +1,98 @@
+#pragma once
+// simulate: runs an organ's exported load case (meshes/<organ>/<organ>.inp) in CalculiX and reads
+// the answer back: converged or not, increments, solver time, the reaction at the fixed set
+// against the resultant of the applied pressure (computed from the loaded faces in their deformed
+// place, not read from the solver), largest displacement and stress, lumen volume change. The
+// INP is read by its matching reader (read_solver_inp); the solver's .frd and .dat by the readers
+// below.
+
+#include "core/errors.h"
+#include "core/progress.h"
+#include "meshing/solver_model.h"
+
+#include <array>
+
+#include <nlohmann/json.hpp>
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace organsmith {
+
+/// The solver could not run or did not converge (exit 70 / 71); the message quotes the solver.
+class SimulationError : public Error {
+ public:
+  SimulationError(ExitCode code, std::string message, std::filesystem::path path = {}, std::string hint = {})
+      : Error(code, std::move(message), std::move(path), std::move(hint)) {}
+};
+
+/// An INP written by write_inp, read back: the model, its load case and the fixed node set.
+struct SolverInput {
+  SolverModel model;
+  std::string fixed_node_set;     ///< name of the *BOUNDARY set of the load case
+  std::string pressure_surface;   ///< the *DSLOAD surface
+  double pressure_MPa = 0.0;
+  std::vector<std::string> inactive_regions;
+  bool ras = false;               ///< coordinates in the file are RAS
+};
+/// Reads an INP that organsmith wrote. InputError naming the file and line on anything else.
+SolverInput read_solver_inp(const std::filesystem::path& inp);
+/// True when the INP has a load step (organs whose surfaces could not be found have none).
+bool has_load_case(const SolverInput& in);
+
+/// Last converged result of a CalculiX .frd: node displacements (mm) and nodal stresses (MPa,
+/// xx yy zz xy yz zx), indexed by 0-based node id (rows of zeros for nodes without a value).
+struct FrdResult {
+  std::vector<std::array<double, 3>> displacement_mm;
+  std::vector<std::array<double, 6>> stress_MPa;
+  double time = 0.0;
+};
+FrdResult read_frd(const std::filesystem::path& frd, std::size_t node_count);
+
+struct SimulateOptions {
+  std::string solver = "ccx";  ///< executable, looked up on PATH
+  int threads = 0;             ///< OpenMP threads of the solver; 0 = every core
+  double timeout_s = 0.0;      ///< 0 = none
+};
+
+struct SimulationResult {
+  std::string organ;
+  bool converged = false;
+  int increments = 0;            ///< converged increments
+  int cutbacks = 0;              ///< attempts the solver cut back
+  double solver_seconds = 0.0;
+  double load_factor = 0.0;      ///< fraction of the load reached (1 when converged)
+  std::array<double, 3> reaction_N{0, 0, 0};          ///< sum of RF over the fixed set
+  std::array<double, 3> applied_resultant_N{0, 0, 0}; ///< ∫ p n da over the loaded faces, deformed
+  double load_magnitude_N = 0.0;  ///< p Σ |area| of the loaded faces (the scale of the balance)
+  double balance_error = 0.0;     ///< |reaction − applied| / load_magnitude
+  double max_displacement_mm = 0.0;
+  double max_von_mises_Pa = 0.0;
+  double lumen_volume_mm3 = 0.0, lumen_volume_change_mm3 = 0.0;
+  std::string solver_message;     ///< the solver's own words when it failed
+  nlohmann::json to_json() const;
+};
+
+/// The model, the solver's answer and the figures drawn from both.
+struct Simulation {
+  SolverInput input;
+  FrdResult frd;
+  SimulationResult result;
+};
+
+/// Runs `inp` in CalculiX inside `work_dir` (created; the solver's files stay there) and reads
+/// the result. Throws SimulationError: exit 70 when the solver is not installed, 71 when it
+/// stops without converging (with its message and the load fraction reached).
+Simulation simulate_inp(const std::filesystem::path& inp, const std::filesystem::path& work_dir,
+                        const SimulateOptions& options, Progress& progress);
+
+/// The figures of a result against its model (balance, displacement, stress, lumen volume).
+void evaluate_simulation(const SolverInput& in, const FrdResult& frd, SimulationResult& r);
+
+/// Writes the simulation result of one organ: `<organ>.vtu` (undeformed nodes with displacement
+/// and von Mises stress per node, region per element) and `<organ>.json`.
+void write_simulation_files(const SolverInput& in, const FrdResult& frd, const SimulationResult& r,
+                            const std::filesystem::path& dir);
+
+}  // namespace organsmith
