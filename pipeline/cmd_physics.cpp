@@ -232,6 +232,12 @@ int run_calibrate(const ModelFlags& mf, const FitFlags& ff, const fs::path& data
              {"mutation_scale", o.ga.mutation_scale},
              {"polish", o.polish}};
   if (mf.model == "fung-organ") j["bulk_modulus_Pa"] = mf.options.bulk_modulus_Pa;
+  if (!cutting) {
+    // The calibrated range: a solver form of this law is fitted over it (physics/materials/solver_fit.h).
+    double lo = 1e300, hi = -1e300;
+    for (const auto& p : data.points) lo = std::min(lo, p.x), hi = std::max(hi, p.x);
+    j["stretch_range"] = {lo, hi};
+  }
   if (cutting) j["blade_speed_m_per_s"] = mf.options.blade_speed_m_per_s;
   if (mf.model == "ogden") j["ogden_terms"] = mf.options.ogden_terms;
   j["tool_version"] = tool_version();

@@ -336,6 +336,7 @@ nlohmann::json SimulationResult::to_json() const {
           {"increments", increments},
           {"cutbacks", cutbacks},
           {"load_factor", load_factor},
+          {"solver_seconds", solver_seconds},
           {"reaction_N", reaction_N},
           {"applied_pressure_resultant_N", applied_resultant_N},
           {"load_magnitude_N", load_magnitude_N},

@@ -6,6 +6,7 @@
 // thesis' gallbladder wall law is driven far past it. Needs calculix-ccx; skipped without it.
 
 #include "meshing/export.h"
+#include "physics/materials/solver_fit.h"
 #include "pipeline/simulate.h"
 
 #include "test_support.h"
@@ -56,8 +57,8 @@ TEST(Simulate, OrganLoadCasesConvergeAndBalanceInCalculix) {
   const fs::path out = tmp / "out";
   {
     std::ofstream c(tmp / "case.toml");
-    c << "[case]\ninput = \"phantom\"\n[phantom]\nsize = 256\n[[organ]]\nname = \"gallbladder\"\n[[organ]]\nname = \"trachea\"\n"
-         "[stages.mesh]\nedge_mm = 3.0\npressure_kPa = { gallbladder = 0.1, trachea = 0.01 }\n"
+    c << "[case]\ninput = \"phantom\"\n[[organ]]\nname = \"gallbladder\"\n[[organ]]\nname = \"trachea\"\n"
+         "[stages.mesh]\nedge_mm = 4.0\npressure_kPa = { gallbladder = 0.1, trachea = 0.01 }\n"
          "[stages.simulate]\nenabled = true\n";
   }
   const auto r = run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out) + " --until simulate");
@@ -92,7 +93,7 @@ TEST(Simulate, OrganLoadCasesConvergeAndBalanceInCalculix) {
     const double ratio = s["lumen_volume_change_mm3"].get<double>() / estimate_mm3;
     std::printf("%s: %d increments, %.1f s; max displacement %.3g mm; lumen %.4g ml, change %.4g ml, thin-walled %.4g ml "
                 "(hoop stretch %.3f, r0 %.2f mm): ratio %.2f; balance %.2g\n",
-                organ, s["increments"].get<int>(), 0.0, s["max_displacement_mm"].get<double>(), V0 / 1000,
+                organ, s["increments"].get<int>(), s["solver_seconds"].get<double>(), s["max_displacement_mm"].get<double>(), V0 / 1000,
                 s["lumen_volume_change_mm3"].get<double>() / 1000, estimate_mm3 / 1000, l, r0, ratio,
                 s["reaction_balance_error"].get<double>());
     EXPECT_GT(ratio, 0.1);
@@ -104,7 +105,7 @@ TEST(Simulate, OrganLoadCasesConvergeAndBalanceInCalculix) {
 
   // `simulate` on the run's directory: the stage is unchanged, so it is skipped (same outputs);
   // out of time it stops with exit 71 and the earlier results stay as they were.
-  const auto before = organsmith::testing::file_digests(out / "simulation");
+  const auto before = organsmith::testing::file_digests(out / "simulation");  // solver_seconds included: a rerun would differ
   const auto again = run_cli("simulate " + quoted(out));
   EXPECT_EQ(again.exit_code, 0) << again.output;
   EXPECT_EQ(organsmith::testing::file_digests(out / "simulation"), before);
@@ -128,4 +129,59 @@ TEST(Simulate, WithoutTheSolverOnPathTheErrorNamesThePackage) {
   const auto r = run_cli("simulate " + quoted(out) + " --solver /nonexistent/ccx");
   EXPECT_EQ(r.exit_code, 70) << r.output;
   EXPECT_NE(r.output.find("calculix-ccx"), std::string::npos) << r.output;
+}
+
+TEST(Simulate, ACaseGivesARegionItsOwnCalibration) {
+  // A researcher's own curves (here: the Table 5.1.1 mean law with twice its c, to stretch 1.25),
+  // calibrated with `organsmith calibrate`, put on the gallbladder wall by the case.
+  organsmith::testing::ScratchDir tmp("own-material");
+  const auto model = organsmith::physics::make_model("fung-wall");
+  {
+    std::ofstream csv(tmp / "curves.csv");
+    csv << "stretch,stress_pa,direction\n";
+    for (const char* dir : {"circumferential", "longitudinal"})
+      for (int i = 1; i <= 10; ++i) {
+        const double l = 1.0 + 0.025 * i;
+        const organsmith::physics::LoadPoint pt{l, 1.0, std::string(dir) == "circumferential"
+                                                            ? organsmith::physics::LoadCase::uniaxial_circumferential
+                                                            : organsmith::physics::LoadCase::uniaxial_longitudinal};
+        const std::vector<double> p = {2 * 19.11, 17.06, 18.25, 6.59};
+        csv << l << "," << model->respond_one(pt, p) << "," << dir << "\n";
+      }
+  }
+  const auto cal = run_cli("calibrate --model fung-wall --data " + quoted(tmp / "curves.csv") + " --out " + quoted(tmp / "cal") +
+                           " --generations 40 --population 60");
+  ASSERT_EQ(cal.exit_code, 0) << cal.output;
+  EXPECT_DOUBLE_EQ(read_json(tmp / "cal" / "params.json")["stretch_range"][1].get<double>(), 1.25);
+  {
+    std::ofstream c(tmp / "case.toml");
+    c << "[case]\ninput = \"phantom\"\n[phantom]\nsize = 256\n[[organ]]\nname = \"gallbladder\"\n"
+         "[materials]\ngallbladder_wall = \"cal/params.json\"\n[stages.mesh]\nedge_mm = 4.0\nformats = [\"inp\"]\n";
+  }
+  const auto r = run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(tmp / "out") + " --until attach");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  const nlohmann::json m = read_json(tmp / "out" / "materials.json")["regions"]["gallbladder_wall"];
+  EXPECT_EQ(fs::path(m["calibration"].get<std::string>()), fs::weakly_canonical(tmp / "cal" / "params.json"));
+  EXPECT_DOUBLE_EQ(m["solver"]["stretch_range"][1].get<double>(), 1.25);
+  EXPECT_LT(m["solver"]["max_relative_error"].get<double>(), 0.05);
+  // Twice the preset's c: the fitted solid is about twice as stiff as the preset's at small strain.
+  const nlohmann::json preset = read_json(tmp / "out" / "materials.json")["regions"]["gallbladder_body"];
+  double mu_own = 0, mu_preset_wall = 0;
+  for (double mu : m["solver"]["mu_Pa"]) mu_own += mu;
+  const auto preset_fit = organsmith::physics::fit_solver_material(
+      organsmith::physics::region_law_from_preset(organsmith::physics::builtin_material_library(), "fung-wall/table-5.1.1/mean"));
+  for (double mu : preset_fit.material.ogden_mu_Pa) mu_preset_wall += mu;
+  EXPECT_NEAR(mu_own / mu_preset_wall, 2.0, 0.3);
+  const std::string inp = organsmith::testing::read_file(tmp / "out" / "meshes" / "gallbladder" / "gallbladder.inp");
+  EXPECT_NE(inp.find("params.json"), std::string::npos);
+  (void)preset;
+
+  // A reference that is neither a preset nor a calibration: exit 20, naming the key.
+  {
+    std::ofstream c(tmp / "bad.toml");
+    c << "[case]\ninput = \"phantom\"\n[[organ]]\nname = \"gallbladder\"\n[materials]\ngallbladder_wall = \"nope/params.json\"\n";
+  }
+  const auto bad = run_cli("run " + quoted(tmp / "bad.toml") + " --out " + quoted(tmp / "out2"));
+  EXPECT_EQ(bad.exit_code, 20) << bad.output;
+  EXPECT_NE(bad.output.find("gallbladder_wall"), std::string::npos) << bad.output;
 }

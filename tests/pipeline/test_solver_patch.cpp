@@ -14,6 +14,7 @@
 #include <cmath>
 #include <cstdio>
 #include <fstream>
+#include <map>
 #include <sstream>
 
 namespace fs = std::filesystem;
@@ -123,4 +124,112 @@ TEST(SolverPatch, EveryPresetInCalculixFollowsItsCalibratedLaw) {
     }
   }
   EXPECT_EQ(presets, 13);
+}
+
+namespace {
+
+/// A 20 × 20 × 40 mm block on a lattice of half-cells (5 mm cells, nodes every 2.5 mm), meshed as
+/// C3D4, C3D10 (six Kuhn tetrahedra per cell; their mid-edge nodes are lattice points) or C3D20R
+/// (the hexahedral reference), clamped at z = 0 and pulled 1 % at z = 40 (lateral motion held
+/// there too: the constrained case where nearly incompressible tetrahedra lock). Returns the axial
+/// reaction (N).
+double block_reaction_N(const SolverMaterial& mat, const std::string& type, const fs::path& dir) {
+  const int nx = 4, ny = 4, nz = 8;  // cells
+  const double h = 5.0;
+  auto id = [&](int i, int j, int k) { return 1 + i + (2 * nx + 1) * (j + (2 * ny + 1) * k); };  // half-cell lattice
+  std::ostringstream s;
+  s << "*NODE, NSET=ALL\n";
+  for (int k = 0; k <= 2 * nz; ++k)
+    for (int j = 0; j <= 2 * ny; ++j)
+      for (int i = 0; i <= 2 * nx; ++i) s << id(i, j, k) << ", " << i * h / 2 << ", " << j * h / 2 << ", " << k * h / 2 << "\n";
+  s << "*ELEMENT, TYPE=" << type << ", ELSET=BLOCK\n";
+  int e = 0;
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) {
+        // Corner c of the cell at lattice (2i + dx, 2j + dy, 2k + dz).
+        auto c = [&](int dx, int dy, int dz) { return std::array<int, 3>{2 * i + 2 * dx, 2 * j + 2 * dy, 2 * k + 2 * dz}; };
+        auto mid = [&](std::array<int, 3> a, std::array<int, 3> b) { return id((a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2); };
+        auto at = [&](std::array<int, 3> a) { return id(a[0], a[1], a[2]); };
+        if (type == "C3D20R") {
+          const std::array<std::array<int, 3>, 8> v = {c(0, 0, 0), c(1, 0, 0), c(1, 1, 0), c(0, 1, 0),
+                                                      c(0, 0, 1), c(1, 0, 1), c(1, 1, 1), c(0, 1, 1)};
+          s << ++e;
+          for (const auto& p : v) s << ", " << at(p);
+          const int edges[12][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {4, 5}, {5, 6}, {6, 7}, {7, 4}, {0, 4}, {1, 5}, {2, 6}, {3, 7}};
+          for (int q = 0; q < 12; ++q) s << (q == 7 ? ",\n" : ", ") << mid(v[edges[q][0]], v[edges[q][1]]);  // 16 entries a line
+          s << "\n";
+          continue;
+        }
+        // Six tetrahedra around the diagonal (0,0,0)–(1,1,1), each positively oriented.
+        const std::array<std::array<int, 3>, 6> path = {{{0, 1, 2}, {0, 2, 1}, {1, 0, 2}, {1, 2, 0}, {2, 0, 1}, {2, 1, 0}}};
+        for (const auto& order : path) {
+          std::array<std::array<int, 3>, 4> v;
+          std::array<int, 3> d{0, 0, 0};
+          v[0] = c(0, 0, 0);
+          for (int q = 0; q < 3; ++q) {
+            d[order[q]] = 1;
+            v[q + 1] = c(d[0], d[1], d[2]);
+          }
+          // Orientation of this path's tet: the permutation's parity.
+          const bool odd = (order[0] == 0 && order[1] == 2) || (order[0] == 1 && order[1] == 0) || (order[0] == 2 && order[1] == 1);
+          if (odd) std::swap(v[1], v[2]);
+          s << ++e;
+          for (const auto& p : v) s << ", " << at(p);
+          if (type == "C3D10")
+            for (const auto& [a, b] : std::array<std::pair<int, int>, 6>{{{0, 1}, {1, 2}, {2, 0}, {0, 3}, {1, 3}, {2, 3}}})
+              s << ", " << mid(v[a], v[b]);
+          s << "\n";
+        }
+      }
+  s << "*NSET, NSET=BOTTOM\n";
+  int n = 0;
+  for (int j = 0; j <= 2 * ny; ++j)
+    for (int i = 0; i <= 2 * nx; ++i) s << id(i, j, 0) << (++n % 8 ? ", " : "\n");
+  s << "\n*NSET, NSET=TOP\n";
+  n = 0;
+  for (int j = 0; j <= 2 * ny; ++j)
+    for (int i = 0; i <= 2 * nx; ++i) s << id(i, j, 2 * nz) << (++n % 8 ? ", " : "\n");
+  s << "\n*MATERIAL, NAME=M\n*HYPERELASTIC, OGDEN, N=3\n";
+  for (int q = 0; q < 3; ++q) s << mat.ogden_mu_Pa[q] * 1e-6 << "," << mat.ogden_alpha[q] << ",";
+  s << 2.0 / (mat.bulk_modulus_Pa * 1e-6) << ",1e20\n1e20\n*SOLID SECTION, ELSET=BLOCK, MATERIAL=M\n";
+  s << "*STEP, NLGEOM\n*STATIC\n0.25, 1.0\n*BOUNDARY\nBOTTOM, 1, 3\nTOP, 1, 2\nTOP, 3, 3, 0.4\n"
+       "*NODE PRINT, NSET=TOP, TOTALS=ONLY\nRF\n*END STEP\n";
+  {
+    std::ofstream f(dir / "block.inp");
+    f << s.str();
+  }
+  const std::string cmd = "cd " + organsmith::testing::quoted(dir) + " && OMP_NUM_THREADS=1 ccx -i block > ccx.log 2>&1";
+  EXPECT_EQ(std::system(cmd.c_str()), 0) << organsmith::testing::read_file(dir / "ccx.log");
+  std::ifstream dat(dir / "block.dat");
+  std::string line;
+  double fz = 0;
+  while (std::getline(dat, line)) {
+    if (line.find("total force") == std::string::npos) continue;
+    while (std::getline(dat, line) && line.find_first_not_of(' ') == std::string::npos) {
+    }
+    double fx, fy;
+    std::istringstream(line) >> fx >> fy >> fz;
+  }
+  return fz;
+}
+
+}  // namespace
+
+TEST(SolverPatch, QuadraticTetrahedraDoNotLockWhereLinearOnesDo) {
+  if (!have_ccx()) GTEST_SKIP() << "CalculiX (ccx) not installed: apt-get install calculix-ccx (scripts/install-deps)";
+  organsmith::testing::ScratchDir dir("solver-locking");
+  const SolverFit fit = fit_solver_material(region_law_from_preset(builtin_material_library(), "fung-wall/table-5.1.1/mean"));
+  std::map<std::string, double> f;
+  for (const char* type : {"C3D4", "C3D10", "C3D20R"}) {
+    fs::create_directories(dir / type);
+    f[type] = block_reaction_N(fit.material, type, dir / type);
+  }
+  std::printf("20x20x40 mm block of the exported gallbladder wall (K/mu0 = %.0f), clamped, pulled 1 %%: axial reaction "
+              "C3D4 %.4g N, C3D10 %.4g N, C3D20R %.4g N (C3D4 %+.1f %%, C3D10 %+.2f %% from the hexahedra)\n",
+              fit.material.bulk_modulus_Pa / (fit.material.ogden_mu_Pa[0] + fit.material.ogden_mu_Pa[1] + fit.material.ogden_mu_Pa[2]),
+              f["C3D4"], f["C3D10"], f["C3D20R"], 100 * (f["C3D4"] / f["C3D20R"] - 1), 100 * (f["C3D10"] / f["C3D20R"] - 1));
+  EXPECT_GT(f["C3D20R"], 0.0);
+  EXPECT_NEAR(f["C3D10"] / f["C3D20R"], 1.0, 0.02);
+  EXPECT_GT(f["C3D4"] / f["C3D20R"], 1.1) << "linear tetrahedra lock in this constrained case";
 }
