@@ -1,3 +1,5 @@
+// Over 400 lines: the five volume writers (VTU, MSH 4.1 and 2.2, INP, FEB) share one solver model,
+// one region/surface grouping and the load-step resolution; each writer is short.
 // Volume writers on the solver model: VTU, Gmsh 4.1 and 2.2, CalculiX/Abaqus INP and FEBio 4.0
 // FEB. One model, one numbering: element ids are 1-based in region order, node ids 1-based with
 // mid-edge nodes after the corners, and the sets and surfaces carry the same names everywhere.

@@ -1,3 +1,5 @@
+// Over 400 lines: quadratic nodes, boundary faces and the per-model surface rules (tube cut faces,
+// lumen by distance to the lumen surface, liver bed) build one model and share its face helpers.
 // Solver models: quadratic tetrahedra, boundary surfaces and node sets (see solver_model.h).
 
 #include "meshing/solver_model.h"

@@ -238,6 +238,31 @@ void tri_shape(bool quadratic, double xi, double eta, double N[6], double dxi[6]
   deta[0] = -(4 * l1 - 1), deta[1] = 0, deta[2] = 4 * l3 - 1, deta[3] = -4 * l2, deta[4] = 4 * l2, deta[5] = 4 * (l1 - l3);
 }
 
+/// Von Mises stress of a stress tensor (xx yy zz xy yz zx), same unit.
+double von_mises(const std::array<double, 6>& s) {
+  return std::sqrt(0.5 * ((s[0] - s[1]) * (s[0] - s[1]) + (s[1] - s[2]) * (s[1] - s[2]) + (s[2] - s[0]) * (s[2] - s[0])) +
+                   3 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]));
+}
+
+/// Visits the quadrature points of face `f` with positions from `at`: shape functions N, the point
+/// x and the area vector n da (into the element, by the face's node order), weights included.
+template <class At, class Visit>
+void for_each_face_point(const SolverModel& m, const SolverFace& f, At&& at, Visit&& visit) {
+  const auto ids = m.face_nodes(f);
+  for (const auto& q : kQuad) {
+    double N[6], dxi[6], deta[6];
+    tri_shape(m.quadratic, q[0], q[1], N, dxi, deta);
+    Eigen::Vector3d x = Eigen::Vector3d::Zero(), xxi = Eigen::Vector3d::Zero(), xeta = Eigen::Vector3d::Zero();
+    for (std::size_t k = 0; k < ids.size(); ++k) {
+      const Eigen::Vector3d p = at(ids[k]);
+      x += N[k] * p;
+      xxi += dxi[k] * p;
+      xeta += deta[k] * p;
+    }
+    visit(ids, N, x, Eigen::Vector3d(0.5 * q[2] * xxi.cross(xeta)));
+  }
+}
+
 }  // namespace
 
 void evaluate_simulation(const SolverInput& in, const FrdResult& frd, SimulationResult& r) {
@@ -251,24 +276,15 @@ void evaluate_simulation(const SolverInput& in, const FrdResult& frd, Simulation
   const double p_N_per_mm2 = in.pressure_MPa;
   std::map<std::int32_t, Eigen::Vector3d> nodal;
   double magnitude = 0;
-  for (const auto& f : m.surfaces.at(in.pressure_surface)) {
-    const auto ids = m.face_nodes(f);
-    for (const auto& q : kQuad) {
-      double N[6], dxi[6], deta[6];
-      tri_shape(m.quadratic, q[0], q[1], N, dxi, deta);
-      Eigen::Vector3d xxi = Eigen::Vector3d::Zero(), xeta = Eigen::Vector3d::Zero();
-      for (std::size_t k = 0; k < ids.size(); ++k) {
-        xxi += dxi[k] * deformed(ids[k]);
-        xeta += deta[k] * deformed(ids[k]);
-      }
-      const Eigen::Vector3d nda = 0.5 * q[2] * xxi.cross(xeta);  // into the element (face order)
+  for (const auto& f : m.surfaces.at(in.pressure_surface))
+    for_each_face_point(m, f, deformed, [&](const std::vector<std::int32_t>& ids, const double* N, const Eigen::Vector3d&,
+                                            const Eigen::Vector3d& nda) {
       magnitude += p_N_per_mm2 * nda.norm();
       for (std::size_t k = 0; k < ids.size(); ++k) {
         auto [it, fresh] = nodal.emplace(ids[k], Eigen::Vector3d::Zero());
         it->second += p_N_per_mm2 * N[k] * nda;
       }
-    }
-  }
+    });
   // CalculiX's RF at a node is the external force there (reaction plus any load on that node), so
   // at equilibrium the fixed set's RF balances the loads on the nodes that are not fixed.
   const auto& fixed = m.node_sets.at(in.fixed_node_set);
@@ -294,10 +310,7 @@ void evaluate_simulation(const SolverInput& in, const FrdResult& frd, Simulation
   r.max_von_mises_Pa = 0;
   for (std::size_t v = 0; v < frd.stress_MPa.size(); ++v) {
     if (!active[v]) continue;
-    const auto& s = frd.stress_MPa[v];
-    const double vm = std::sqrt(0.5 * ((s[0] - s[1]) * (s[0] - s[1]) + (s[1] - s[2]) * (s[1] - s[2]) + (s[2] - s[0]) * (s[2] - s[0])) +
-                                3 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]));
-    r.max_von_mises_Pa = std::max(r.max_von_mises_Pa, vm * 1e6);
+    r.max_von_mises_Pa = std::max(r.max_von_mises_Pa, von_mises(frd.stress_MPa[v]) * 1e6);
   }
   // Lumen volume by the divergence theorem with the field (x_a, 0, 0), a an axis no cut face is
   // normal to, so that the open ends of a tube add nothing: V = ∫ x_a n_a da over the lumen
@@ -308,20 +321,13 @@ void evaluate_simulation(const SolverInput& in, const FrdResult& frd, Simulation
   }
   auto volume = [&](bool def) {
     double V = 0;
+    const auto undeformed = [&](std::int32_t v) { return m.nodes_lps_mm[std::size_t(v)]; };
     for (const auto& f : m.surfaces.at(in.pressure_surface)) {
-      const auto ids = m.face_nodes(f);
-      for (const auto& q : kQuad) {
-        double N[6], dxi[6], deta[6];
-        tri_shape(m.quadratic, q[0], q[1], N, dxi, deta);
-        Eigen::Vector3d x = Eigen::Vector3d::Zero(), xxi = Eigen::Vector3d::Zero(), xeta = Eigen::Vector3d::Zero();
-        for (std::size_t k = 0; k < ids.size(); ++k) {
-          const Eigen::Vector3d p = def ? deformed(ids[k]) : m.nodes_lps_mm[std::size_t(ids[k])];
-          x += N[k] * p;
-          xxi += dxi[k] * p;
-          xeta += deta[k] * p;
-        }
-        V += x[axis] * (0.5 * q[2] * xxi.cross(xeta))[axis];
-      }
+      auto add = [&](const std::vector<std::int32_t>&, const double*, const Eigen::Vector3d& x, const Eigen::Vector3d& nda) {
+        V += x[axis] * nda[axis];
+      };
+      if (def) for_each_face_point(m, f, deformed, add);
+      else for_each_face_point(m, f, undeformed, add);
     }
     return V;
   };
@@ -501,9 +507,7 @@ void write_simulation_files(const SolverInput& in, const FrdResult& frd, const S
     const auto& d = frd.displacement_mm[v];
     const double flip = in.ras ? -1.0 : 1.0;  // the VTU is in the frame the INP was written in
     u.values.insert(u.values.end(), {flip * d[0], flip * d[1], d[2]});
-    const auto& s = frd.stress_MPa[v];
-    vm.values.push_back(1e6 * std::sqrt(0.5 * ((s[0] - s[1]) * (s[0] - s[1]) + (s[1] - s[2]) * (s[1] - s[2]) + (s[2] - s[0]) * (s[2] - s[0])) +
-                                        3 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5])));
+    vm.values.push_back(1e6 * von_mises(frd.stress_MPa[v]));
   }
   fields.push_back(std::move(u));
   fields.push_back(std::move(vm));

@@ -1,3 +1,5 @@
+// Over 400 lines: the meshing tests share one phantom meshed once (PhantomMeshes fixture); splitting
+// them would mesh it again per file.
 // Properties of organsmith's meshes: the surface guarantees (closed, 2-manifold, outward,
 // no self-intersections or degenerate faces, edge lengths, angles, volume, HD95), the wall
 // bodies, the tetrahedral quality gate, exporter round trips checked by independent readers,
