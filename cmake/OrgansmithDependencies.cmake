@@ -55,6 +55,15 @@ if(NOT TOMLPP_FOUND)
   target_include_directories(PkgConfig::TOMLPP INTERFACE ${TOMLPP_INCLUDE_DIR})
 endif()
 
+find_library(CSV_LIBRARY csv)
+find_path(CSV_INCLUDE_DIR csv.h)
+if(NOT CSV_LIBRARY OR NOT CSV_INCLUDE_DIR)
+  message(FATAL_ERROR "organsmith: libcsv (CSV tables) was not found. Install the Debian package "
+    "'libcsv-dev' (apt-get install libcsv-dev), or run scripts/install-deps.")
+endif()
+add_library(csv UNKNOWN IMPORTED)
+set_target_properties(csv PROPERTIES IMPORTED_LOCATION ${CSV_LIBRARY} INTERFACE_INCLUDE_DIRECTORIES ${CSV_INCLUDE_DIR})
+
 find_program(CCACHE_PROGRAM ccache)
 if(CCACHE_PROGRAM AND NOT CMAKE_CXX_COMPILER_LAUNCHER)
   set(CMAKE_CXX_COMPILER_LAUNCHER ${CCACHE_PROGRAM})

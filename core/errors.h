@@ -33,6 +33,8 @@ enum class ExitCode : int {
   mesh_quality = 61,       ///< a mesh failed its quality gate (surface guarantees or tetrahedral quality)
   solver_not_found = 70,   ///< the finite-element solver (CalculiX ccx) is not installed
   solver_failed = 71,      ///< the solver stopped without a converged answer (its message is given)
+  cohort_incomplete = 80, ///< a cohort ran to its end but some studies failed (cohort.csv says which and why)
+  scheduler = 81,          ///< the batch scheduler (Slurm) is missing, refused the job or could not be reached
   organ_not_found = 50,    ///< segmentation could not find the organ (no label written)
   bad_seed = 51,           ///< a segmentation seed outside the image or not inside the organ
 };

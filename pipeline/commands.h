@@ -29,5 +29,7 @@ std::vector<Command> degradation_commands(CLI::App& app);
 std::vector<Command> haptics_commands(CLI::App& app);
 /// `simulate` (CalculiX runs of the organs' load cases; pipeline/cmd_simulate.cpp).
 std::vector<Command> simulate_commands(CLI::App& app);
+/// `cohort` (many studies, local or Slurm; pipeline/cmd_cohort.cpp).
+std::vector<Command> cohort_commands(CLI::App& app);
 
 }  // namespace organsmith

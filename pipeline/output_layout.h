@@ -53,4 +53,22 @@ struct OutputLayout {
   std::filesystem::path snapshots_dir() const { return root / "snapshots"; }
 };
 
+/// A cohort's output directory: one run's folder per study (laid out as OutputLayout), the
+/// summary beside them, and the engine's working files under cohort/.
+struct CohortLayout {
+  std::filesystem::path root;
+
+  std::filesystem::path study(const std::string& id) const { return root / id; }
+  std::filesystem::path summary_csv() const { return root / "cohort.csv"; }
+  std::filesystem::path summary_json() const { return root / "cohort.json"; }
+  std::filesystem::path contact_sheet() const { return root / "cohort.png"; }
+  std::filesystem::path work_dir() const { return root / "cohort"; }
+  std::filesystem::path plan() const { return work_dir() / "plan.json"; }
+  std::filesystem::path slurm_script() const { return work_dir() / "cohort.sbatch"; }
+  std::filesystem::path status(const std::string& id) const { return work_dir() / "status" / (id + ".json"); }
+  std::filesystem::path log(const std::string& id) const { return work_dir() / "logs" / (id + ".log"); }
+  /// Slurm's own output file of array task `index` (what the task printed before it started).
+  std::filesystem::path slurm_log_pattern() const { return work_dir() / "logs" / "slurm-%A_%a.out"; }
+};
+
 }  // namespace organsmith

@@ -7,6 +7,7 @@
 #include "core/file_io.h"
 #include "core/format.h"
 #include "core/grid.h"
+#include "core/process.h"
 #include "pipeline/runner.h"
 #include "meshing/export.h"
 
@@ -18,13 +19,10 @@
 #include <cmath>
 #include <csignal>
 #include <cstdlib>
-#include <fcntl.h>
 #include <fstream>
 #include <map>
 #include <sstream>
-#include <sys/wait.h>
 #include <thread>
-#include <unistd.h>
 
 namespace organsmith {
 namespace fs = std::filesystem;
@@ -358,16 +356,6 @@ nlohmann::json SimulationResult::to_json() const {
 
 namespace {
 
-fs::path find_on_path(const std::string& exe) {
-  if (exe.find('/') != std::string::npos) return fs::exists(exe) ? fs::path(exe) : fs::path();
-  const char* path = std::getenv("PATH");
-  std::stringstream ss(path ? path : "/usr/bin:/bin");
-  std::string dir;
-  while (std::getline(ss, dir, ':'))
-    if (!dir.empty() && access((fs::path(dir) / exe).c_str(), X_OK) == 0) return fs::path(dir) / exe;
-  return {};
-}
-
 /// Converged increments, cutbacks and the step time reached, from jobname.sta.
 void read_sta(const fs::path& sta, SimulationResult& r) {
   std::ifstream in(sta);
@@ -441,32 +429,28 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
   const int threads = o.threads > 0 ? o.threads : int(std::max(1u, std::thread::hardware_concurrency()));
 
   const auto t0 = std::chrono::steady_clock::now();
-  const pid_t pid = fork();
-  if (pid < 0) throw SimulationError(ExitCode::solver_failed, "cannot start the solver", exe);
-  if (pid == 0) {
-    if (chdir(work_dir.c_str()) != 0) _exit(127);
-    const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    if (fd >= 0) {
-      dup2(fd, 1);
-      dup2(fd, 2);
-      close(fd);
-    }
-    setenv("OMP_NUM_THREADS", std::to_string(threads).c_str(), 1);
-    execl(exe.c_str(), exe.c_str(), "-i", job.c_str(), static_cast<char*>(nullptr));
-    _exit(127);
-  }
-  int status = 0;
+  ChildSpec spec;
+  spec.exe = exe;
+  spec.args = {"-i", job};
+  spec.cwd = work_dir;
+  spec.log = log;
+  spec.env = {{"OMP_NUM_THREADS", std::to_string(threads)}};
+  fs::remove(log);
+  ChildProcess child(spec);
+  int exit_code = -1;
   const std::string what = "simulate " + r.organ + " (CalculiX)";
   for (;;) {
-    const pid_t w = waitpid(pid, &status, WNOHANG);
-    if (w == pid) break;
+    if (auto code = child.poll()) {
+      exit_code = *code;
+      break;
+    }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     SimulationResult partial;
     read_sta(work_dir / (job + ".sta"), partial);
     const bool timed_out = o.timeout_s > 0 && seconds > o.timeout_s;
     if (progress.cancelled() || timed_out) {
-      kill(pid, SIGTERM);
-      waitpid(pid, &status, 0);
+      child.signal(SIGTERM);
+      child.wait();
       if (timed_out)
         throw SimulationError(ExitCode::solver_failed,
                               r.organ + ": the solver did not finish within " + format_g(o.timeout_s, 4) + " s (load " +
@@ -480,7 +464,7 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
   r.solver_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   read_sta(work_dir / (job + ".sta"), r);
   const std::string text = read_file(log).value_or("");
-  const bool finished = WIFEXITED(status) && WEXITSTATUS(status) == 0 && text.find("Job finished") != std::string::npos;
+  const bool finished = exit_code == 0 && text.find("Job finished") != std::string::npos;
   r.converged = finished && r.load_factor >= 1.0 - 1e-9;
   if (!r.converged) {
     r.solver_message = solver_errors(log);

@@ -1,0 +1,90 @@
+#include "core/csv.h"
+
+#include <csv.h>
+
+#include <sstream>
+
+namespace organsmith {
+
+int CsvTable::column(const std::string& name) const {
+  for (std::size_t i = 0; i < header.fields.size(); ++i)
+    if (header.fields[i] == name) return int(i);
+  return -1;
+}
+
+namespace {
+
+struct Collector {
+  std::vector<CsvRow> rows;
+  CsvRow current;
+  int line = 0;
+};
+
+void on_field(void* bytes, std::size_t length, void* data) {
+  auto* c = static_cast<Collector*>(data);
+  c->current.fields.emplace_back(bytes ? static_cast<const char*>(bytes) : "", bytes ? length : 0);
+}
+
+void on_row(int, void* data) {
+  auto* c = static_cast<Collector*>(data);
+  c->current.line = c->line;
+  c->rows.push_back(std::move(c->current));
+  c->current = {};
+}
+
+}  // namespace
+
+CsvTable parse_csv(const std::string& text, const std::filesystem::path& source, ExitCode code) {
+  csv_parser parser;
+  if (csv_init(&parser, CSV_STRICT | CSV_STRICT_FINI) != 0) throw Error(code, "cannot start the CSV reader", source);
+  Collector c;
+  std::istringstream in(text);
+  std::string line;
+  bool in_quote = false;  // a quoted field spans this line break: '#' lines are data there
+  auto fail = [&](const std::string& what) {
+    csv_free(&parser);
+    throw Error(code, what + " (line " + std::to_string(c.line) + ")", source,
+                "write one row per line, fields separated by commas, quotes doubled inside quoted fields");
+  };
+  while (std::getline(in, line)) {
+    ++c.line;
+    if (!line.empty() && line.back() == '\r') line.pop_back();
+    if (!in_quote) {
+      const auto first = line.find_first_not_of(" \t");
+      if (first == std::string::npos || line[first] == '#') continue;
+    }
+    line += '\n';
+    const std::size_t before = c.rows.size();
+    if (csv_parse(&parser, line.data(), line.size(), on_field, on_row, &c) != line.size())
+      fail(std::string("malformed CSV: ") + csv_strerror(csv_error(&parser)));
+    // libcsv holds a row open only inside a quoted field (the line break ended every other row).
+    in_quote = c.rows.size() == before;
+  }
+  if (csv_fini(&parser, on_field, on_row, &c) != 0) fail("a quoted field is not closed");
+  csv_free(&parser);
+
+  CsvTable table;
+  if (c.rows.empty()) throw Error(code, "the CSV file has no header row", source, "the first line names the columns");
+  table.header = std::move(c.rows.front());
+  for (std::size_t i = 1; i < c.rows.size(); ++i) {
+    if (c.rows[i].fields.size() != table.header.fields.size())
+      throw Error(code,
+                  "line " + std::to_string(c.rows[i].line) + " has " + std::to_string(c.rows[i].fields.size()) +
+                      " fields where the header has " + std::to_string(table.header.fields.size()),
+                  source, "give every row one field per column (an empty field is allowed: a,,c)");
+    table.rows.push_back(std::move(c.rows[i]));
+  }
+  return table;
+}
+
+std::string csv_field(const std::string& field) {
+  if (field.find_first_of(",\"\r\n") == std::string::npos) return field;
+  std::string out = "\"";
+  for (char ch : field) {
+    if (ch == '"') out += '"';
+    out += ch;
+  }
+  return out + "\"";
+}
+
+}  // namespace organsmith
