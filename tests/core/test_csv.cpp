@@ -1,0 +1,54 @@
+// CSV tables (core/csv.h): RFC 4180 quoting, line numbers in errors, and the writer's quoting.
+#include "core/csv.h"
+
+#include <gtest/gtest.h>
+
+using namespace organsmith;
+
+TEST(Csv, ReadsQuotedFieldsCommentsAndLineNumbers) {
+  const std::string text =
+      "# a comment\n"
+      "id,input,note\n"
+      "\n"
+      "a, /data/x ,\"has, a comma\"\n"
+      "b,phantom,\"two\nlines\"\n"
+      "c,\"q\"\"uote\",\r\n";
+  const CsvTable t = parse_csv(text, "t.csv", ExitCode::case_file);
+  ASSERT_EQ(t.header.fields, (std::vector<std::string>{"id", "input", "note"}));
+  EXPECT_EQ(t.header.line, 2);
+  ASSERT_EQ(t.rows.size(), 3u);
+  EXPECT_EQ(t.rows[0].fields[1], "/data/x");  // spaces around an unquoted field are dropped
+  EXPECT_EQ(t.rows[0].fields[2], "has, a comma");
+  EXPECT_EQ(t.rows[0].line, 4);
+  EXPECT_EQ(t.rows[1].fields[2], "two\nlines");
+  EXPECT_EQ(t.rows[1].line, 6);  // the line where the row ends
+  EXPECT_EQ(t.rows[2].fields[1], "q\"uote");
+  EXPECT_EQ(t.rows[2].fields[2], "");
+  EXPECT_EQ(t.column("input"), 1);
+  EXPECT_EQ(t.column("missing"), -1);
+}
+
+TEST(Csv, RejectsRaggedRowsAndOpenQuotesNamingTheLine) {
+  auto message = [](const std::string& text) -> std::string {
+    try {
+      parse_csv(text, "bad.csv", ExitCode::case_file);
+    } catch (const Error& e) {
+      EXPECT_EQ(e.code(), ExitCode::case_file);
+      EXPECT_EQ(e.path(), "bad.csv");
+      return e.message();
+    }
+    return "no error";
+  };
+  EXPECT_NE(message("a,b\n1,2\n3\n").find("line 3 has 1 fields where the header has 2"), std::string::npos);
+  EXPECT_NE(message("a,b\n1,\"open\n").find("not closed"), std::string::npos);
+  EXPECT_NE(message("a,b\n1,x\"y\n").find("malformed CSV"), std::string::npos);  // a quote inside an unquoted field
+  EXPECT_NE(message("# only a comment\n").find("no header"), std::string::npos);
+}
+
+TEST(Csv, WriterQuotesOnlyWhatNeedsIt) {
+  EXPECT_EQ(csv_field("plain"), "plain");
+  EXPECT_EQ(csv_field("a,b"), "\"a,b\"");
+  EXPECT_EQ(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
+  const CsvTable t = parse_csv("x,y\n" + csv_field("a,\"b\"\nc") + ",2\n", "", ExitCode::case_file);
+  EXPECT_EQ(t.rows.at(0).fields[0], "a,\"b\"\nc");  // the reader gives back what the writer wrote
+}

@@ -1,0 +1,131 @@
+#!/bin/bash
+# A private one-node Slurm cluster for the cohort tests, entirely inside a fresh directory:
+#   slurm_cluster.sh start DIR   writes DIR/slurm.conf, starts munged, slurmctld and slurmd (PIDs in
+#                                DIR/run/*.pid) and waits until the node is idle; clients then need
+#                                only SLURM_CONF=DIR/slurm.conf (the munge socket is named in it)
+#   slurm_cluster.sh stop DIR    cancels every job, stops the daemons by PID and waits until gone
+# Needs Debian's slurm-wlm and munge (scripts/install-deps) and root (the daemons run as root).
+# No cgroups: processes are tracked by process group, memory by polling /proc.
+set -euo pipefail
+cmd=${1:?usage: slurm_cluster.sh start|stop DIR}
+DIR=$(realpath -m "${2:?usage: slurm_cluster.sh start|stop DIR}")
+export SLURM_CONF=$DIR/slurm.conf
+alive() { [ -d "/proc/$1" ] && ! grep -q '^State:[[:space:]]*Z' "/proc/$1/status" 2>/dev/null; }
+
+stop() {
+  [ -d "$DIR/run" ] || return 0
+  if [ -s "$DIR/run/slurmctld.pid" ] && alive "$(cat "$DIR/run/slurmctld.pid")"; then
+    scancel --partition=debug >/dev/null 2>&1 || true
+    local end=$(( $(date +%s) + 10 ))
+    while squeue -h -t R,CG 2>/dev/null | grep -q . && [ "$(date +%s)" -lt $end ]; do sleep 0.1; done
+  fi
+  for name in slurmd slurmctld munged; do
+    local pf=$DIR/run/$name.pid pid
+    [ -s "$pf" ] || continue
+    pid=$(cat "$pf")
+    if alive "$pid" && grep -qx "$name" "/proc/$pid/comm" 2>/dev/null; then
+      kill -TERM "$pid" 2>/dev/null || true
+      local end=$(( $(date +%s) + 15 ))
+      while alive "$pid"; do
+        [ "$(date +%s)" -ge $end ] && { kill -KILL "$pid" 2>/dev/null || true; end=$(( end + 5 )); }
+        sleep 0.05
+      done
+    fi
+    rm -f "$pf"
+  done
+  # Job processes of this cluster that outlived their step (their environment names our SLURM_CONF).
+  for p in /proc/[0-9]*; do
+    p=${p#/proc/}
+    [ "$p" = $$ ] && continue
+    tr '\0' '\n' < "/proc/$p/environ" 2>/dev/null | grep -qx "SLURM_CONF=$SLURM_CONF" || continue
+    tr '\0' '\n' < "/proc/$p/environ" 2>/dev/null | grep -q '^SLURM_JOB_ID=' && kill -KILL "$p" 2>/dev/null || true
+  done
+}
+
+if [ "$cmd" = stop ]; then stop; exit 0; fi
+[ "$cmd" = start ] || { echo "usage: slurm_cluster.sh start|stop DIR" >&2; exit 2; }
+for tool in munged slurmctld slurmd sbatch; do
+  command -v "$tool" >/dev/null || { echo "slurm_cluster.sh: $tool not found (scripts/install-deps installs slurm-wlm and munge)" >&2; exit 3; }
+done
+# Unix socket paths are limited to 107 bytes; slurmstepd's lie under DIR/spool.
+[ ${#DIR} -le 60 ] || { echo "slurm_cluster.sh: DIR is too long for Slurm's sockets: $DIR" >&2; exit 2; }
+[ -e "$DIR/slurm.conf" ] && { echo "slurm_cluster.sh: $DIR holds a cluster already" >&2; exit 2; }
+fail() { echo "slurm_cluster.sh: $*" >&2; for f in "$DIR"/log/*; do [ -s "$f" ] && tail -n 20 "$f" >&2; done; stop; exit 1; }
+trap 'fail "start-up failed"' ERR
+
+mkdir -p "$DIR"/{munge,state,spool,log,run}
+chmod 755 "$DIR/munge"
+free_port() {  # a loopback port no socket uses
+  local p
+  for _ in $(seq 200); do
+    p=$(( 20000 + (RANDOM * 32768 + RANDOM) % 40000 ))
+    [ "$p" != "${1:-}" ] && ! ss -Htan "( sport = :$p )" | grep -q . && { echo "$p"; return; }
+  done
+  return 1
+}
+CTLD_PORT=$(free_port); SLURMD_PORT=$(free_port "$CTLD_PORT")
+HOST=$(hostname -s)
+HW=$(slurmd -C | sed -n 's/^NodeName=[^ ]* //p' | sed 's/ *RealMemory=[0-9]*//; s/ *UpTime=.*//')
+MEM=$(slurmd -C | sed -n 's/.*RealMemory=\([0-9]*\).*/\1/p')
+
+dd if=/dev/urandom of="$DIR/munge/munge.key" bs=1024 count=1 status=none
+chmod 400 "$DIR/munge/munge.key"
+munged --socket="$DIR/munge/munge.socket" --key-file="$DIR/munge/munge.key" --pid-file="$DIR/run/munged.pid" \
+       --log-file="$DIR/log/munged.log" --seed-file="$DIR/munge/munged.seed" --num-threads=2 -f
+: > "$DIR/plugstack.conf"
+cat > "$DIR/slurm.conf" <<CONF
+ClusterName=organsmith-test
+SlurmctldHost=$HOST(127.0.0.1)
+SlurmctldPort=$CTLD_PORT
+SlurmdPort=$SLURMD_PORT
+SlurmUser=root
+SlurmdUser=root
+AuthType=auth/munge
+AuthInfo=socket=$DIR/munge/munge.socket
+CredType=cred/munge
+PlugStackConfig=$DIR/plugstack.conf
+StateSaveLocation=$DIR/state
+SlurmdSpoolDir=$DIR/spool
+SlurmctldPidFile=$DIR/run/slurmctld.pidfile
+SlurmdPidFile=$DIR/run/slurmd.pidfile
+SlurmctldLogFile=$DIR/log/slurmctld.log
+SlurmdLogFile=$DIR/log/slurmd.log
+MailProg=/bin/true
+MpiDefault=none
+SwitchType=switch/none
+ProctrackType=proctrack/pgid
+TaskPlugin=task/none
+JobContainerType=job_container/none
+SelectType=select/cons_tres
+SelectTypeParameters=CR_Core_Memory
+JobAcctGatherType=jobacct_gather/linux
+JobAcctGatherFrequency=task=1
+JobAcctGatherParams=OverMemoryKill
+AccountingStorageType=accounting_storage/none
+JobCompType=jobcomp/filetxt
+JobCompLoc=$DIR/jobcomp.txt
+MinJobAge=3600
+SchedulerType=sched/backfill
+SchedulerParameters=batch_sched_delay=0,sched_min_interval=0,bf_interval=1
+KillWait=2
+MessageTimeout=10
+SlurmdTimeout=300
+InactiveLimit=0
+ReturnToService=2
+SlurmdParameters=config_overrides
+NodeName=$HOST NodeAddr=127.0.0.1 $HW RealMemory=$MEM State=UNKNOWN
+PartitionName=debug Nodes=ALL Default=YES MaxTime=INFINITE State=UP
+CONF
+# -D keeps each daemon in the foreground, so $! is its PID; setsid keeps a Ctrl-C aimed at the
+# caller away from them.
+setsid slurmctld -D -i -f "$SLURM_CONF" > "$DIR/log/slurmctld.out" 2>&1 < /dev/null &
+echo $! > "$DIR/run/slurmctld.pid"
+setsid slurmd -D -f "$SLURM_CONF" > "$DIR/log/slurmd.out" 2>&1 < /dev/null &
+echo $! > "$DIR/run/slurmd.pid"
+deadline=$(( $(date +%s) + 60 ))
+until [ "$(sinfo -h -N -n "$HOST" -o %T 2>/dev/null || true)" = idle ]; do
+  for d in slurmctld slurmd; do alive "$(cat "$DIR/run/$d.pid")" || fail "$d died"; done
+  [ "$(date +%s)" -ge $deadline ] && fail "the node is not idle after 60 s"
+  sleep 0.1
+done
+trap - ERR
