@@ -4,6 +4,7 @@
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/format.h"
+#include "core/memory.h"
 #include "pipeline/case_file.h"
 #include "pipeline/image_io.h"
 #include "pipeline/output_layout.h"
@@ -11,6 +12,7 @@
 
 #include <spdlog/spdlog.h>
 
+#include <cmath>
 #include <set>
 
 namespace fs = std::filesystem;
@@ -29,19 +31,33 @@ nlohmann::json read_json_or_null(const fs::path& p) {
   }
 }
 
-/// Dice of the study's label `label` against the reference's nonzero voxels (same grid needed).
+/// Dice of the study's label `label` against the reference's nonzero voxels. The reference may
+/// lie on another grid (axis order, flips): each study voxel looks up the reference voxel at its
+/// centre (nearest), and reference voxels outside the study's grid count as missed.
 nlohmann::json dice(const fs::path& labels_file, std::uint8_t label, const fs::path& reference) {
   try {
     const LabelMap a = read_label_map(labels_file), b = read_label_map(reference);
-    if (a.grid.size_vox != b.grid.size_vox) return "reference grid differs from the study's";
-    std::int64_t both = 0, na = 0, nb = 0;
-    for (std::size_t i = 0; i < a.labels.size(); ++i) {
-      const bool x = a.labels[i] == label, y = b.labels[i] != 0;
-      na += x;
-      nb += y;
-      both += x && y;
-    }
-    return na + nb ? 2.0 * double(both) / double(na + nb) : 1.0;
+    const auto& na_vox = a.grid.size_vox;
+    const auto& nb_vox = b.grid.size_vox;
+    std::int64_t both = 0, in_a = 0, in_b = 0;
+    for (std::int64_t k = 0; k < nb_vox[2]; ++k)
+      for (std::int64_t j = 0; j < nb_vox[1]; ++j)
+        for (std::int64_t i = 0; i < nb_vox[0]; ++i) in_b += b.at(i, j, k) != 0;
+    for (std::int64_t k = 0; k < na_vox[2]; ++k)
+      for (std::int64_t j = 0; j < na_vox[1]; ++j)
+        for (std::int64_t i = 0; i < na_vox[0]; ++i) {
+          const bool x = a.at(i, j, k) == label;
+          in_a += x;
+          if (!x) continue;
+          const Eigen::Vector3d r = b.grid.lps_mm_to_index(a.grid.index_to_lps_mm(Eigen::Vector3d(double(i), double(j), double(k))));
+          const std::int64_t ri = std::llround(r.x()), rj = std::llround(r.y()), rk = std::llround(r.z());
+          both += ri >= 0 && rj >= 0 && rk >= 0 && ri < nb_vox[0] && rj < nb_vox[1] && rk < nb_vox[2] && b.at(ri, rj, rk) != 0;
+        }
+    if (a.grid.spacing_mm.prod() <= 0 || b.grid.spacing_mm.prod() <= 0) return nullptr;
+    // Overlap counted in the study's voxels, the reference's size in its own voxels: both in mm³.
+    const double va = double(in_a) * a.grid.spacing_mm.prod(), vb = double(in_b) * b.grid.spacing_mm.prod();
+    const double vboth = double(both) * a.grid.spacing_mm.prod();
+    return va + vb > 0 ? 2.0 * vboth / (va + vb) : 1.0;
   } catch (const Error& e) {
     return std::string("not computed: ") + e.message();
   }
@@ -131,6 +147,7 @@ nlohmann::json cohort_summary_json(const CohortPlan& plan, const CohortResult& r
   return {{"studies", studies},
           {"counts", {{"total", plan.studies.size()}, {"done", done}, {"reused", reused}, {"failed", failed}}},
           {"seconds", result.seconds},
+          {"engine_peak_rss_mib", peak_rss_mib()},
           {"slurm_jobs", result.slurm_jobs}};
 }
 

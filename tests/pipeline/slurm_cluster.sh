@@ -37,8 +37,9 @@ stop() {
   for p in /proc/[0-9]*; do
     p=${p#/proc/}
     [ "$p" = $$ ] && continue
-    tr '\0' '\n' < "/proc/$p/environ" 2>/dev/null | grep -qx "SLURM_CONF=$SLURM_CONF" || continue
-    tr '\0' '\n' < "/proc/$p/environ" 2>/dev/null | grep -q '^SLURM_JOB_ID=' && kill -KILL "$p" 2>/dev/null || true
+    env=$( { tr '\0' '\n' < "/proc/$p/environ"; } 2>/dev/null ) || continue
+    grep -qx "SLURM_CONF=$SLURM_CONF" <<< "$env" || continue
+    grep -q '^SLURM_JOB_ID=' <<< "$env" && { kill -KILL "$p" 2>/dev/null || true; }
   done
 }
 
