@@ -35,6 +35,11 @@ enum class ExitCode : int {
   solver_failed = 71,      ///< the solver stopped without a converged answer (its message is given)
   cohort_incomplete = 80, ///< a cohort ran to its end but some studies failed (cohort.csv says which and why)
   scheduler = 81,          ///< the batch scheduler (Slurm) is missing, refused the job or could not be reached
+  pacs_unreachable = 90,   ///< the PACS did not answer (connection refused, no route, timeout) after the retries
+  pacs_refused = 91,       ///< the PACS refused us: wrong user or password, or our AE title / its AE title not accepted
+  pacs_not_found = 92,     ///< the study (or --series) is not in the PACS
+  pacs_no_ct = 93,         ///< the study holds no CT series
+  pacs_transfer = 94,      ///< a transfer was cut off or an instance arrived corrupt, after the retries
   organ_not_found = 50,    ///< segmentation could not find the organ (no label written)
   bad_seed = 51,           ///< a segmentation seed outside the image or not inside the organ
 };

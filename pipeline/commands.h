@@ -31,5 +31,7 @@ std::vector<Command> haptics_commands(CLI::App& app);
 std::vector<Command> simulate_commands(CLI::App& app);
 /// `cohort` (many studies, local or Slurm; pipeline/cmd_cohort.cpp).
 std::vector<Command> cohort_commands(CLI::App& app);
+/// `pull` (a study from a PACS into a cache; pipeline/cmd_pull.cpp).
+std::vector<Command> pacs_commands(CLI::App& app);
 
 }  // namespace organsmith

@@ -225,7 +225,7 @@ int main(int argc, char** argv) {
   std::vector<Command> commands;
   for (auto* add : {&segmentation_commands, &meshing_commands, &physics_commands, &degradation_commands,
                      &haptics_commands, &viewer_commands, &simulate_commands,
-                     &cohort_commands})
+                     &cohort_commands, &pacs_commands})
     for (auto& c : (*add)(app)) commands.push_back(std::move(c));
 
   try {
