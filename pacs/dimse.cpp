@@ -20,6 +20,12 @@ namespace organsmith::pacs_detail {
 
 namespace {
 
+/// DCMTK's own log stays silent: every failure is reported by organsmith, in words, once.
+void quiet_dcmtk() {
+  static std::once_flag once;
+  std::call_once(once, [] { OFLog::configure(OFLogger::FATAL_LOG_LEVEL); });
+}
+
 std::string hex4(unsigned v) {
   char buf[8];
   std::snprintf(buf, sizeof buf, "%04x", v & 0xffffu);
@@ -64,11 +70,8 @@ class Scu final : public DcmSCU {
 class DimseClient final : public Client {
  public:
   explicit DimseClient(const PacsEndpoint& p) : pacs_(p) {
-    static std::once_flag once;
-    std::call_once(once, [] {
-      OFLog::configure(OFLogger::ERROR_LOG_LEVEL);
-      setenv("TCP_NODELAY", "1", 0);  // DCMTK reads it at connect: without it every C-STORE waits ~40 ms
-    });
+    quiet_dcmtk();
+    setenv("TCP_NODELAY", "1", 0);  // DCMTK reads it at connect: without it every C-STORE waits ~40 ms
   }
 
   bool has_study(const std::string& study) override {
@@ -200,6 +203,7 @@ class DimseClient final : public Client {
 std::unique_ptr<Client> make_dimse_client(const PacsEndpoint& pacs) { return std::make_unique<DimseClient>(pacs); }
 
 std::string sop_uid_of(const std::string& bytes) {
+  quiet_dcmtk();
   if (bytes.size() < 132 || bytes.compare(128, 4, "DICM") != 0) return {};
   DcmInputBufferStream in;
   in.setBuffer(bytes.data(), offile_off_t(bytes.size()));
@@ -213,7 +217,9 @@ std::string sop_uid_of(const std::string& bytes) {
   OFString uid;
   DcmElement* pixels = nullptr;
   if (!d || d->findAndGetOFString(DCM_SOPInstanceUID, uid).bad() || uid.empty()) return {};
-  if (d->findAndGetElement(DCM_PixelData, pixels).bad() || !pixels || pixels->getLength() == 0) return {};
+  // Encapsulated (compressed) pixel data has no length of its own: its presence is what counts; a
+  // cut-off file already failed to parse above.
+  if (d->findAndGetElement(DCM_PixelData, pixels).bad() || !pixels) return {};
   return uid.c_str();
 }
 

@@ -5,9 +5,9 @@
 // The cache holds patient data: it lives where the user says (never inside an output directory),
 // its folders are mode 0700 and its files 0600, and nothing in it is named by a UID: a study is
 // CACHE/<study key>/ (the first 16 hex digits of SHA-256 of the StudyInstanceUID), a series a
-// folder of it named the same way, an instance <key of its SOPInstanceUID>.dcm. Each study folder
-// has index.json (instance key → bytes, SHA-256): a re-pull fetches only what is missing or no
-// longer matches (truncated, corrupt).
+// folder of it named the same way, an instance <key of its SOPInstanceUID>.dcm. Beside each study
+// folder, <study key>.index.json records every instance's bytes and SHA-256: a re-pull fetches only
+// what is missing or no longer matches (truncated, corrupt).
 
 #include "core/errors.h"
 #include "core/progress.h"

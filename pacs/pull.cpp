@@ -162,7 +162,8 @@ PullResult pull_study(const PacsEndpoint& pacs, const PullOptions& o, Progress& 
   result.study_dir = cached_study_dir(o.cache_dir, o.study_uid);
   make_private_dir(o.cache_dir);
   make_private_dir(result.study_dir);
-  Index index(result.study_dir / "index.json");
+  // The index lies beside the study's folder, so that the folder holds DICOM files only.
+  Index index(result.study_dir.string() + ".index.json");
   // Every instance of every series first: the progress knows the total before fetching.
   std::vector<std::pair<std::string, std::vector<std::string>>> plan;
   for (const auto& s : series) {
@@ -236,6 +237,7 @@ bool purge_study(const fs::path& cache_dir, const std::string& study_uid) {
   std::error_code ec;
   if (!fs::exists(dir, ec)) return false;
   fs::remove_all(dir, ec);
+  if (!ec) fs::remove(dir.string() + ".index.json", ec);
   if (ec) throw OutputError("cannot remove the study from the cache: " + ec.message(), dir);
   return true;
 }

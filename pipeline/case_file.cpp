@@ -5,6 +5,7 @@
 #include "core/toml_parse.h"
 #include "default_case_toml.h"  // generated from data/default_case.toml
 #include "pipeline/stage_options_toml.h"
+#include "pacs/pacs.h"
 #include "segmentation/presets.h"
 
 #include <toml++/toml.h>
@@ -114,6 +115,51 @@ static std::size_t first_invalid_utf8_line(const std::string& text) {
   return 0;
 }
 
+/// input = "pacs://<name>/<StudyInstanceUID>" with its [pacs.<name>] table.
+static PacsSource pacs_source(const toml::table& root, const std::string& input, const fs::path& base,
+                              const fs::path& origin) {
+  PacsSource p;
+  const std::string rest = input.substr(7);
+  const auto slash = rest.find('/');
+  p.name = rest.substr(0, slash);
+  p.study_uid = slash == std::string::npos ? "" : rest.substr(slash + 1);
+  const bool uid_ok = !p.study_uid.empty() && p.study_uid.size() <= 64 &&
+                      p.study_uid.find_first_not_of("0123456789.") == std::string::npos;
+  fail_if(p.name.empty() || !uid_ok, "[case] input '" + input + "' is no PACS study", origin,
+          "write input = \"pacs://<name>/<StudyInstanceUID>\" with a [pacs.<name>] table");
+  const toml::table* all = root["pacs"].as_table();
+  const toml::table* t = all ? (*all)[p.name].as_table() : nullptr;
+  fail_if(!t, "[case] input names the PACS '" + p.name + "' but the case has no [pacs." + p.name + "] table", origin,
+          "add [pacs." + p.name + "] with url = \"http://host:8042/dicom-web\" (or \"dicom://AET@host:104\")");
+  Table pt(t, "pacs." + p.name, origin);
+  pt.only({"url", "calling_aet", "ca_file", "cache", "timeout_s", "retries"});
+  std::string cache, ca;
+  pt.get("url", p.url);
+  pt.get("calling_aet", p.calling_aet);
+  pt.get("ca_file", ca);
+  pt.get("cache", cache);
+  pt.get("timeout_s", p.timeout_s);
+  pt.get("retries", p.retries);
+  try {
+    (void)parse_pacs_url(p.url, p.calling_aet);
+  } catch (const Error& e) {
+    throw CaseFileError("[pacs." + p.name + "] " + e.message(), origin, e.hint());
+  }
+  fail_if(!(p.timeout_s >= 1 && p.timeout_s <= 3600), "[pacs." + p.name + "] timeout_s must be 1–3600", origin, "60 is the default");
+  fail_if(p.retries < 0 || p.retries > 20, "[pacs." + p.name + "] retries must be 0–20", origin, "3 is the default");
+  if (!ca.empty()) p.ca_file = fs::weakly_canonical(base / ca);
+  if (!cache.empty()) {
+    p.cache_dir = fs::weakly_canonical(base / cache);
+  } else {
+    const char* xdg = std::getenv("XDG_CACHE_HOME");
+    const char* home = std::getenv("HOME");
+    p.cache_dir = xdg && *xdg ? fs::path(xdg) / "organsmith" / "pacs"
+                  : home      ? fs::path(home) / ".cache" / "organsmith" / "pacs"
+                              : fs::temp_directory_path() / "organsmith-pacs";
+  }
+  return p;
+}
+
 CaseFile parse_case(const std::string& text, const fs::path& origin) {
   if (const std::size_t bad = first_invalid_utf8_line(text))
     throw CaseFileError("the case file is not UTF-8 text (line " + std::to_string(bad) + ")", origin,
@@ -126,7 +172,7 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
   c.source = origin;
   const fs::path base = origin.empty() ? fs::current_path() : fs::absolute(origin).parent_path();
 
-  Table(&root, "top level", origin).only({"case", "phantom", "ingest", "organ", "output", "stages", "materials"});
+  Table(&root, "top level", origin).only({"case", "phantom", "ingest", "organ", "output", "stages", "materials", "pacs"});
 
   Table cs(root["case"].as_table(), "case", origin);
   cs.only({"name", "input", "organs"});
@@ -178,7 +224,12 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
   fail_if(input.empty(), "[case] input is empty", origin,
           "give \"phantom\" or a DICOM directory / NIfTI / NRRD / MHA path");
   c.synthesize_phantom = input == "phantom";
-  if (!c.synthesize_phantom) c.input = fs::weakly_canonical(base / input);
+  if (input.rfind("pacs://", 0) == 0) {
+    c.pacs = pacs_source(root, input, base, origin);
+    c.input = cached_study_dir(c.pacs->cache_dir, c.pacs->study_uid);
+  } else if (!c.synthesize_phantom) {
+    c.input = fs::weakly_canonical(base / input);
+  }
 
   Table ph(root["phantom"].as_table(), "phantom", origin);
   ph.only({"seed", "size", "slice_mm", "fov_mm", "extent_mm", "noise_hu", "blur_mm"});
@@ -319,6 +370,8 @@ nlohmann::json to_json(const CaseFile& c) {
   nlohmann::json j;
   j["name"] = c.name;
   j["input"] = c.synthesize_phantom ? std::string("phantom") : c.input.string();
+  // A PACS study is recorded by its cache folder and the hash of its UID, never the UID.
+  if (c.pacs) j["pacs"] = {{"name", c.pacs->name}, {"url", c.pacs->url}, {"study_key", uid_key(c.pacs->study_uid)}};
   j["phantom"] = {{"seed", c.phantom.seed},          {"size_vox", c.phantom.size_vox},
                   {"slice_mm", c.phantom.slice_mm},  {"fov_mm", c.phantom.fov_mm},
                   {"extent_mm", c.phantom.extent_mm}, {"blur_mm", c.phantom.blur_mm},

@@ -28,12 +28,26 @@ struct OrganSpec {
   std::filesystem::path label_map;
 };
 
+/// `input = "pacs://<name>/<StudyInstanceUID>"`: the study is pulled from the PACS of the case's
+/// [pacs.<name>] table into its cache before ingest (pacs/pacs.h); `input` is then its cache folder.
+struct PacsSource {
+  std::string name;                      ///< the [pacs.<name>] table
+  std::string url;                       ///< http(s)://…/dicom-web or dicom://AET@host:port
+  std::string calling_aet = "ORGANSMITH";
+  std::filesystem::path ca_file;
+  std::filesystem::path cache_dir;       ///< default $XDG_CACHE_HOME/organsmith/pacs (~/.cache/…)
+  double timeout_s = 60;
+  int retries = 3;
+  std::string study_uid;
+};
+
 /// A parsed and validated case.
 struct CaseFile {
   std::filesystem::path source;   ///< the file it came from; empty for the embedded default
   std::string name = "case";
   bool synthesize_phantom = false; ///< input = "phantom"
   std::filesystem::path input;     ///< absolute input path (when not synthesizing)
+  std::optional<PacsSource> pacs;  ///< input names a PACS study (input = its cache folder)
   PhantomOptions phantom;
   IngestOptions ingest;
   std::vector<OrganSpec> organs;

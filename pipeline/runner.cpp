@@ -4,6 +4,8 @@
 
 #include "pipeline/runner.h"
 
+#include "pacs/pacs.h"
+
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/memory.h"
@@ -126,6 +128,22 @@ class Runner {
   }
 
  private:
+  /// A PACS input: the study into its cache (only what is not there intact is fetched).
+  void pull_from_pacs() {
+    const PacsSource& src = *case_.pacs;
+    PacsEndpoint pacs = parse_pacs_url(src.url, src.calling_aet);
+    pacs.ca_file = src.ca_file;
+    pacs.timeout_s = src.timeout_s;
+    pacs.retries = src.retries;
+    PullOptions o;
+    o.study_uid = src.study_uid;
+    o.series_uid = case_.ingest.series_uid;
+    o.cache_dir = src.cache_dir;
+    const PullResult r = pull_study(pacs, o, progress_);
+    spdlog::info("pulled study {} from PACS '{}': {} instances ({} fetched, {} cached) in {:.1f} s", uid_key(src.study_uid),
+                 src.name, r.instances, r.fetched, r.reused, r.seconds);
+  }
+
   void run_stages() {
     fs::path input = case_.input;
     if (case_.synthesize_phantom) {
@@ -138,6 +156,7 @@ class Runner {
                }});
       input = layout_.phantom_dicom();
     }
+    if (case_.pacs) pull_from_pacs();
     input_ = input;
     const nlohmann::json ingest_opts = to_json(case_)["ingest"];
     const std::string organs = to_json(case_)["organs"].dump();
