@@ -33,6 +33,7 @@ BENCHES = bench_ingest segmentation/bench_gvf segmentation/bench_segment meshing
 bench: build
 	@for b in $(BENCHES); do echo "== $$b"; $(BUILD_DIR)/bench/$$b || echo "($$b: target not met)"; done
 	@echo "== cohort engines"; bash bench/pipeline/cohort_bench.sh $(BUILD_DIR) || echo "(cohort bench failed)"
+	@echo "== PACS pulls"; bash bench/pipeline/pull_bench.sh $(BUILD_DIR) || echo "(pull bench failed)"
 
 clean:
 	@rm -rf $(BUILD_DIR) $(BUILD_DIR).configure.log
