@@ -24,7 +24,7 @@ namespace {
 /// Sizes and modification times of every file of the input: a study is redone when its input
 /// changed, without reading the pixels here.
 std::string input_signature(const std::string& input) {
-  if (input == "phantom") return "phantom";
+  if (input == "phantom" || input.rfind("pacs://", 0) == 0) return input;
   std::error_code ec;
   std::ostringstream out;
   auto one = [&](const fs::path& p) {
@@ -140,8 +140,8 @@ CohortPlan load_cohort(const fs::path& cohort_file, const fs::path& shared_case,
       const std::string& input = row.fields[std::size_t(input_col)];
       if (input.empty()) {
         errors.push_back(column_ref(table, row, std::size_t(input_col)) + ": no input given");
-      } else if (input == "phantom") {
-        s.input = "phantom";
+      } else if (input == "phantom" || input.rfind("pacs://", 0) == 0) {
+        s.input = input;  // a PACS study: the shared case names the PACS ([pacs.<name>])
       } else {
         s.input = (base / input).lexically_normal().string();
         if (!fs::exists(s.input))
@@ -283,8 +283,10 @@ CohortPlan cohort_plan_from_json(const nlohmann::json& j, const fs::path& file) 
 
 std::string redact_study_text(const CohortStudy& study, std::string text) {
   if (study.input.empty() || study.input == "phantom") return text;
-  for (std::size_t at; (at = text.find(study.input)) != std::string::npos;)
-    text.replace(at, study.input.size(), "<input>");
+  std::string needle = study.input;
+  if (needle.rfind("pacs://", 0) == 0) needle = needle.substr(needle.rfind('/') + 1);  // the StudyInstanceUID
+  if (needle.empty()) return text;
+  for (std::size_t at; (at = text.find(needle)) != std::string::npos;) text.replace(at, needle.size(), "<input>");
   return text;
 }
 

@@ -6,7 +6,8 @@
 //   s001,/data/ct/s001,gallbladder trachea,12.5 -40 310,,/data/ref/s001_gb.nii.gz
 //
 // `id` (a pseudonym: it names the study's folder, its log and its row in the summary) and `input`
-// (a DICOM directory or file, a NIfTI/NRRD/MHA file, or "phantom") are required. Every other
+// (a DICOM directory or file, a NIfTI/NRRD/MHA file, "phantom", or "pacs://<name>/<StudyUID>" with
+// [pacs.<name>] in the shared case) are required. Every other
 // column is optional, an empty field meaning "as the shared case says":
 //   organs                   the organs to model, separated by spaces or ';'
 //   seed_lps_mm.<organ>      "x y z" in mm (DICOM patient coordinates); seed_ijk.<organ> "i j k"

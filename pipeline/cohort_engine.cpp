@@ -318,7 +318,7 @@ CohortResult run_cohort(const CohortPlan& plan, const CohortOptions& o, Progress
   dir_options.command = "cohort";
   dir_options.inputs = {plan.cohort_file, plan.shared_case};
   for (const auto& s : plan.studies)
-    if (s.input != "phantom") dir_options.inputs.push_back(s.input);
+    if (s.input != "phantom" && s.input.rfind("pacs://", 0) != 0) dir_options.inputs.push_back(s.input);
   OutputDir dir(plan.out_dir, dir_options);
 
   // What is left to do: studies that completed with the same fingerprint are reused.
