@@ -11,10 +11,17 @@
 #include <dcmtk/dcmdata/dcistrmb.h>
 #include <dcmtk/dcmdata/dcostrmb.h>
 #include <dcmtk/dcmnet/diutil.h>
+#include <dcmtk/dcmnet/dstorscp.h>
 #include <dcmtk/dcmnet/scu.h>
 
+#include <atomic>
 #include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <mutex>
+#include <thread>
+#include <unistd.h>
 
 namespace organsmith::pacs_detail {
 
@@ -65,6 +72,41 @@ class Scu final : public DcmSCU {
     (*store)(std::move(bytes));
     return EC_Normal;
   }
+};
+
+/// Our C-STORE SCP for C-MOVE: listens on a port in its own thread and keeps what it receives as
+/// files in a private folder until the move is over.
+class MoveReceiver final : public DcmStorageSCP {
+ public:
+  MoveReceiver(const std::string& aet, int port, const std::filesystem::path& dir) {
+    setAETitle(aet.c_str());
+    setPort(Uint16(port));
+    setOutputDirectory(dir.c_str());
+    setConnectionBlockingMode(DUL_NOBLOCK);
+    setConnectionTimeout(1);  // listen() looks at stop_ once a second
+    OFList<OFString> ts;
+    ts.push_back(UID_LittleEndianExplicitTransferSyntax);
+    ts.push_back(UID_LittleEndianImplicitTransferSyntax);
+    for (const char* sop_class : {UID_CTImageStorage, UID_EnhancedCTImageStorage}) addPresentationContext(sop_class, ts);
+  }
+  void start() {
+    thread_ = std::thread([this] { result_ = listen(); });
+  }
+  void stop() {
+    stop_ = true;
+    if (thread_.joinable()) thread_.join();
+  }
+  ~MoveReceiver() override { stop(); }
+  const OFCondition& result() const { return result_; }
+
+ protected:
+  OFBool stopAfterConnectionTimeout() override { return stop_.load(); }
+  OFBool stopAfterCurrentAssociation() override { return stop_.load(); }
+
+ private:
+  std::atomic<bool> stop_{false};
+  std::thread thread_;
+  OFCondition result_ = EC_Normal;
 };
 
 class DimseClient final : public Client {
@@ -132,12 +174,64 @@ class DimseClient final : public Client {
                         "C-GET ended with status 0x" + hex4(status) + (failed ? " (" + std::to_string(failed) + " failed)" : ""),
                         "the PACS' log says why (e.g. it cannot convert the images to an uncompressed transfer syntax)");
     };
+    if (pacs_.move_port > 0) return move(study, series, sops, store, progress);
     if (sops.empty()) return one("SERIES", "");
     for (const auto& sop : sops) one("IMAGE", sop);
   }
 
+  /// C-MOVE to our own C-STORE SCP: the PACS opens an association to us and stores the instances.
+  void move(const std::string& study, const std::string& series, const std::vector<std::string>& sops,
+            const StoreFn& store, Progress& progress) {
+    char tmpl[] = "/tmp/organsmith-move-XXXXXX";  // private (0700) until the files are handed on
+    if (!mkdtemp(tmpl)) throw PacsError(ExitCode::internal, "cannot create a folder for C-MOVE");
+    const std::filesystem::path dir = tmpl;
+    struct Cleanup {
+      std::filesystem::path d;
+      ~Cleanup() {
+        std::error_code ec;
+        std::filesystem::remove_all(d, ec);
+      }
+    } cleanup{dir};
+    MoveReceiver receiver(pacs_.calling_aet, pacs_.move_port, dir);
+    receiver.start();
+    auto one = [&](const std::string& level, const std::string& sop) {
+      progress.check_cancelled();
+      Scu scu;
+      connect(scu, false, UID_MOVEStudyRootQueryRetrieveInformationModel);
+      DcmDataset q;
+      q.putAndInsertOFStringArray(DCM_QueryRetrieveLevel, level.c_str());
+      q.putAndInsertOFStringArray(DCM_StudyInstanceUID, study.c_str());
+      q.putAndInsertOFStringArray(DCM_SeriesInstanceUID, series.c_str());
+      if (!sop.empty()) q.putAndInsertOFStringArray(DCM_SOPInstanceUID, sop.c_str());
+      OFList<RetrieveResponse*> responses;
+      const T_ASC_PresentationContextID pc =
+          scu.findPresentationContextID(UID_MOVEStudyRootQueryRetrieveInformationModel, "");
+      const OFCondition c = scu.sendMOVERequest(pc, pacs_.calling_aet.c_str(), &q, &responses);
+      Uint16 status = 0xffff;
+      if (!responses.empty()) status = responses.back()->m_status;
+      for (auto* r : responses) delete r;
+      scu.releaseAssociation();
+      if (c.bad()) throw PacsError(ExitCode::pacs_transfer, std::string("C-MOVE broke off: ") + c.text());
+      if (status == 0xA801)
+        throw PacsError(ExitCode::pacs_refused, "the PACS does not know our AE title '" + pacs_.calling_aet + "' as a C-MOVE destination",
+                        "register it at the PACS with this host and port " + std::to_string(pacs_.move_port));
+      if (status != STATUS_Success && status != 0xff00)
+        throw PacsError(ExitCode::pacs_transfer, "C-MOVE ended with status 0x" + hex4(status),
+                        "the PACS' log says why (it must reach us at port " + std::to_string(pacs_.move_port) + ")");
+    };
+    if (sops.empty()) one("SERIES", "");
+    else
+      for (const auto& sop : sops) one("IMAGE", sop);
+    receiver.stop();
+    for (const auto& e : std::filesystem::recursive_directory_iterator(dir)) {
+      if (!e.is_regular_file()) continue;
+      std::ifstream in(e.path(), std::ios::binary);
+      store(std::string(std::istreambuf_iterator<char>(in), {}));
+    }
+  }
+
  private:
-  void connect(Scu& scu, bool retrieve) {
+  void connect(Scu& scu, bool retrieve, const char* query_model = UID_FINDStudyRootQueryRetrieveInformationModel) {
     scu.setAETitle(pacs_.calling_aet.c_str());
     scu.setPeerHostName(pacs_.host.c_str());
     scu.setPeerPort(Uint16(pacs_.port));
@@ -150,9 +244,7 @@ class DimseClient final : public Client {
     OFList<OFString> ts;
     ts.push_back(UID_LittleEndianExplicitTransferSyntax);
     ts.push_back(UID_LittleEndianImplicitTransferSyntax);
-    scu.addPresentationContext(retrieve ? UID_GETStudyRootQueryRetrieveInformationModel
-                                        : UID_FINDStudyRootQueryRetrieveInformationModel,
-                               ts);
+    scu.addPresentationContext(retrieve ? UID_GETStudyRootQueryRetrieveInformationModel : query_model, ts);
     if (retrieve)
       for (const char* sop_class : {UID_CTImageStorage, UID_EnhancedCTImageStorage})
         scu.addPresentationContext(sop_class, ts, ASC_SC_ROLE_SCP);

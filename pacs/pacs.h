@@ -27,6 +27,9 @@ struct PacsEndpoint {
   int port = 104;                        ///< DIMSE
   std::string called_aet;                ///< DIMSE: the PACS' AE title
   std::string calling_aet = "ORGANSMITH";///< DIMSE: ours
+  /// DIMSE: 0 = retrieve by C-GET; else by C-MOVE to our own C-STORE SCP listening on this port
+  /// (for a PACS without C-GET: it must know our AE title at this host and port).
+  int move_port = 0;
   std::filesystem::path ca_file;         ///< HTTPS: the CA bundle that signs the server's certificate
   /// Credentials (DICOMweb basic auth): from ORGANSMITH_PACS_USER / ORGANSMITH_PACS_PASSWORD,
   /// else ~/.netrc (or $NETRC). Never printed, never written.

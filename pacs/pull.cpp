@@ -178,7 +178,7 @@ PullResult pull_study(const PacsEndpoint& pacs, const PullOptions& o, Progress& 
   result.series = int(plan.size());
 
   int done = 0;
-  const std::string what = "pull " + std::to_string(result.instances) + " instances";
+  std::string what = "pull " + std::to_string(result.instances) + " instances";
   for (const auto& [s, sops] : plan) {
     const fs::path dir = result.study_dir / uid_key(s);
     make_private_dir(dir);
@@ -204,6 +204,10 @@ PullResult pull_study(const PacsEndpoint& pacs, const PullOptions& o, Progress& 
       ++result.fetched;
       result.bytes_fetched += std::int64_t(bytes.size());
       ++done;
+      // The bar counts instances; its label gives the bytes, renewed every tenth of the study.
+      if (done % std::max(1, result.instances / 10) == 0 || done == result.instances)
+        what = "pull " + std::to_string(result.instances) + " instances, " +
+               std::to_string((result.bytes_fetched + 500000) / 1000000) + " MB fetched";
       progress.report(double(done) / std::max(1, result.instances), what);
     };
     for (int attempt = 0; !missing.empty(); ++attempt) {

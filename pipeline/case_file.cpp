@@ -132,7 +132,7 @@ static PacsSource pacs_source(const toml::table& root, const std::string& input,
   fail_if(!t, "[case] input names the PACS '" + p.name + "' but the case has no [pacs." + p.name + "] table", origin,
           "add [pacs." + p.name + "] with url = \"http://host:8042/dicom-web\" (or \"dicom://AET@host:104\")");
   Table pt(t, "pacs." + p.name, origin);
-  pt.only({"url", "calling_aet", "ca_file", "cache", "timeout_s", "retries"});
+  pt.only({"url", "calling_aet", "ca_file", "cache", "timeout_s", "retries", "move_port"});
   std::string cache, ca;
   pt.get("url", p.url);
   pt.get("calling_aet", p.calling_aet);
@@ -140,6 +140,9 @@ static PacsSource pacs_source(const toml::table& root, const std::string& input,
   pt.get("cache", cache);
   pt.get("timeout_s", p.timeout_s);
   pt.get("retries", p.retries);
+  pt.get("move_port", p.move_port);
+  fail_if(p.move_port < 0 || p.move_port > 65535, "[pacs." + p.name + "] move_port must be 0–65535", origin,
+          "0 (the default) retrieves by C-GET");
   try {
     (void)parse_pacs_url(p.url, p.calling_aet);
   } catch (const Error& e) {

@@ -38,6 +38,7 @@ struct PacsSource {
   std::filesystem::path cache_dir;       ///< default $XDG_CACHE_HOME/organsmith/pacs (~/.cache/…)
   double timeout_s = 60;
   int retries = 3;
+  int move_port = 0;                     ///< DIMSE: C-MOVE to our C-STORE SCP on this port (0 = C-GET)
   std::string study_uid;
 };
 

@@ -23,6 +23,7 @@ struct PullArgs {
   std::string pacs, study, series, cache, calling_aet = "ORGANSMITH", ca_file;
   double timeout_s = 60;
   int retries = 3;
+  int move_port = 0;
   bool purge = false, json = false;
 };
 
@@ -50,6 +51,9 @@ int cmd_pull(const PullArgs& a) {
   pacs.ca_file = a.ca_file;
   pacs.timeout_s = a.timeout_s;
   pacs.retries = a.retries;
+  pacs.move_port = a.move_port;
+  if (a.move_port > 0 && pacs.kind != PacsEndpoint::Kind::dimse)
+    throw UsageError("--move-port is for DIMSE (dicom://AET@host:port)", "DICOMweb retrieves by WADO-RS");
   PullOptions o;
   o.study_uid = a.study;
   o.series_uid = a.series;
@@ -87,7 +91,8 @@ std::vector<Command> pacs_commands(CLI::App& app) {
       "pull",
       "Pull a CT study from a PACS into a local cache: by DICOMweb (QIDO-RS, WADO-RS; --pacs\n"
       "http(s)://host:port/dicom-web, basic auth from ORGANSMITH_PACS_USER/ORGANSMITH_PACS_PASSWORD\n"
-      "or ~/.netrc) or by DIMSE (C-FIND, C-GET; --pacs dicom://AET@host:port). Instances already in\n"
+      "or ~/.netrc) or by DIMSE (C-FIND, then C-GET, or C-MOVE with --move-port; --pacs\n"
+      "dicom://AET@host:port). Instances already in\n"
       "the cache and intact are not fetched again; a pull cut off half-way resumes. The cache holds\n"
       "patient data (folders 0700, files 0600, named by hashes): keep it private, outside any output\n"
       "directory. The study's folder is an input for `organsmith run`. Exit 90: PACS unreachable;\n"
@@ -98,6 +103,10 @@ std::vector<Command> pacs_commands(CLI::App& app) {
   cmd->add_option("--series", a->series, "SeriesInstanceUID (default: every CT series of the study)");
   cmd->add_option("--cache", a->cache, "the cache folder (created 0700)")->required();
   cmd->add_option("--calling-aet", a->calling_aet, "DIMSE: our AE title (default ORGANSMITH)");
+  cmd->add_option("--move-port", a->move_port,
+                  "DIMSE: retrieve by C-MOVE to our own C-STORE SCP on this port instead of C-GET (the PACS must "
+                  "know our AE title at this host and port)")
+      ->check(CLI::Range(1, 65535));
   cmd->add_option("--ca-file", a->ca_file, "HTTPS: CA bundle that signs the PACS' certificate");
   cmd->add_option("--timeout-s", a->timeout_s, "seconds before a silent PACS counts as gone (default 60)")
       ->check(CLI::Range(1.0, 3600.0));

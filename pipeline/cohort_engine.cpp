@@ -246,6 +246,8 @@ std::vector<StudyOutcome> run_slurm(const CohortPlan& plan, const std::vector<st
       if (++squeue_failures >= 30)
         throw SchedulerError("squeue cannot reach the Slurm controller: " + trim(q.output),
                              "the job array " + job + " may still run; rerun the cohort to collect it");
+      std::this_thread::sleep_for(std::chrono::milliseconds(int(1000 * o.poll_s)));
+      continue;  // no answer is not "every task has left the queue"
     } else {
       squeue_failures = 0;
       std::istringstream in(q.output);
@@ -262,6 +264,9 @@ std::vector<StudyOutcome> run_slurm(const CohortPlan& plan, const std::vector<st
       const auto status = read_status(layout.status(s.id));
       if (!status && ++absent_polls[index] < 3) continue;  // the status file may be on its way
       const auto state = status ? std::nullopt : finished_task_state(job, index);
+      static const std::set<std::string> still_going = {"PENDING", "CONFIGURING", "RUNNING", "COMPLETING", "SUSPENDED",
+                                                        "REQUEUED", "RESIZING"};
+      if (state && still_going.count(state->first)) continue;  // squeue missed it: not over yet
       StudyOutcome out = outcome_from_status(
           s.id, status, state ? state->second : -1,
           state ? "Slurm task " + job + "_" + std::to_string(index) + " ended " + state->first

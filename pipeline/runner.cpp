@@ -135,6 +135,7 @@ class Runner {
     pacs.ca_file = src.ca_file;
     pacs.timeout_s = src.timeout_s;
     pacs.retries = src.retries;
+    pacs.move_port = src.move_port;
     PullOptions o;
     o.study_uid = src.study_uid;
     o.series_uid = case_.ingest.series_uid;

@@ -6,7 +6,11 @@
 
 #include <gtest/gtest.h>
 
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <sys/socket.h>
 #include <sys/stat.h>
+#include <unistd.h>
 
 #include <cstdlib>
 #include <fstream>
@@ -101,6 +105,19 @@ fs::path pull_dir_of(const fs::path& cache, const std::string& study) {
   return cache / digest.substr(0, 16);
 }
 
+/// A TCP port on loopback that nothing listens on now.
+int free_port() {
+  const int fd = socket(AF_INET, SOCK_STREAM, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t len = sizeof a;
+  bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a);
+  getsockname(fd, reinterpret_cast<sockaddr*>(&a), &len);
+  close(fd);
+  return ntohs(a.sin_port);
+}
+
 bool private_tree(const fs::path& dir) {
   for (const auto& e : fs::recursive_directory_iterator(dir)) {
     struct stat st {};
@@ -164,6 +181,19 @@ TEST(Pacs, PullsByDicomWebAndDimseAsFromDiskAndRunsAPacsInput) {
       EXPECT_EQ(mended["fetched"], 1);
       EXPECT_EQ(ingest_digest(study_dir, tmp.path()), on_disk);
     }
+  }
+
+  // DIMSE C-MOVE to our own C-STORE SCP (for a PACS without C-GET), once Orthanc knows our AE title.
+  {
+    const int port = free_port();
+    const std::string http = orthanc.web().substr(0, orthanc.web().rfind('/'));
+    ASSERT_EQ(std::system(("curl -s -f -o /dev/null -u " + std::string(kUser) + ":" + kPassword +
+                           " -X PUT --data '{\"AET\":\"ORGANSMITH\",\"Host\":\"127.0.0.1\",\"Port\":" +
+                           std::to_string(port) + "}' " + http + "/modalities/organsmith").c_str()), 0);
+    const CliResult moved = run_cli("pull --json --pacs " + orthanc.dimse() + " --move-port " + std::to_string(port) +
+                                    " --study " + chest_study + " --cache " + quoted(tmp / "cache" / "move"));
+    ASSERT_EQ(moved.exit_code, 0) << moved.output;
+    EXPECT_EQ(ingest_digest(pull_dir_of(tmp / "cache" / "move", chest_study), tmp.path()), ingest_digest(chest, tmp.path()));
   }
 
   // A case whose input is a PACS study gives the same outputs as the folder, and no patient name.
