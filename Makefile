@@ -34,6 +34,7 @@ bench: build
 	@for b in $(BENCHES); do echo "== $$b"; $(BUILD_DIR)/bench/$$b || echo "($$b: target not met)"; done
 	@echo "== cohort engines"; bash bench/pipeline/cohort_bench.sh $(BUILD_DIR) || echo "(cohort bench failed)"
 	@echo "== PACS pulls"; bash bench/pipeline/pull_bench.sh $(BUILD_DIR) || echo "(pull bench failed)"
+	@echo "== solver exports and runs"; bash bench/pipeline/solver_bench.sh $(BUILD_DIR) || echo "(solver bench failed)"
 
 clean:
 	@rm -rf $(BUILD_DIR) $(BUILD_DIR).configure.log
