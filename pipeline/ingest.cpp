@@ -17,6 +17,11 @@ IngestResult ingest(const fs::path& input, const IngestOptions& options, Progres
   if (!fs::exists(input, ec))
     throw InputError(ExitCode::input_not_found, "input does not exist", input,
                      "give a DICOM directory, a DICOM file, or a NIfTI/NRRD/MHA file");
+  // A device, a pipe or a socket is no scan (reading /dev/zero or a FIFO would never end).
+  const auto kind = fs::status(input, ec).type();
+  if (kind != fs::file_type::directory && kind != fs::file_type::regular)
+    throw InputError(ExitCode::unsupported_input, "the input is neither a file nor a directory (a device, pipe or socket)",
+                     input, "give a DICOM directory, a DICOM file, or a NIfTI/NRRD/MHA file");
   IngestResult result;
   if (fs::is_regular_file(input) && is_volume_file_name(input)) {
     progress.report(0.0, "reading volume");

@@ -10,6 +10,7 @@
 #include <nlohmann/json.hpp>
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <signal.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -178,4 +179,18 @@ TEST(BadInputs, InterruptAndKillMidRunThenRerun) {
   }
   EXPECT_GT(files, 30u);
   EXPECT_TRUE(fs::exists(tmp / "out" / "snapshots" / "3d_trachea.png"));
+}
+
+// A device or a named pipe given as the scan is refused at once (reading it would never end, and it
+// is no empty directory), naming it.
+TEST(BadInputs, ADeviceOrAPipeIsNoScan) {
+  ScratchDir tmp("bad-kind");
+  const fs::path fifo = tmp / "scan.pipe";
+  ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+  for (const fs::path& input : {fs::path("/dev/zero"), fifo}) {
+    std::string out;
+    EXPECT_EQ(run_cli("info " + quoted(input), &out), int(ExitCode::unsupported_input)) << out;
+    EXPECT_NE(out.find("neither a file nor a directory"), std::string::npos) << out;
+    EXPECT_NE(out.find(input.string()), std::string::npos) << out;
+  }
 }
