@@ -39,6 +39,33 @@ std::string hex4(unsigned v) {
   return buf;
 }
 
+/// The keys of a C-GET or C-MOVE: the whole series when `sop` is empty, else that instance.
+void retrieve_keys(DcmDataset& q, const std::string& study, const std::string& series, const std::string& sop) {
+  q.putAndInsertOFStringArray(DCM_QueryRetrieveLevel, sop.empty() ? "SERIES" : "IMAGE");
+  q.putAndInsertOFStringArray(DCM_StudyInstanceUID, study.c_str());
+  q.putAndInsertOFStringArray(DCM_SeriesInstanceUID, series.c_str());
+  if (!sop.empty()) q.putAndInsertOFStringArray(DCM_SOPInstanceUID, sop.c_str());
+}
+
+/// One request for the whole series when `sops` is empty, else one per instance.
+template <typename F>
+void for_each_request(const std::vector<std::string>& sops, F&& request) {
+  if (sops.empty()) return request(std::string());
+  for (const auto& sop : sops) request(sop);
+}
+
+/// The last response's status (0xffff when none came) and failed sub-operations; frees the list.
+Uint16 final_status(OFList<RetrieveResponse*>& responses, unsigned* failed) {
+  Uint16 status = 0xffff;
+  if (!responses.empty()) {
+    status = responses.back()->m_status;
+    if (failed) *failed = responses.back()->m_numberOfFailedSubops;
+  }
+  for (auto* r : responses) delete r;
+  responses.clear();
+  return status;
+}
+
 /// The SCU with its C-STORE sub-operations handed to a callback, as Part 10 bytes in memory.
 class Scu final : public DcmSCU {
  public:
@@ -143,40 +170,30 @@ class DimseClient final : public Client {
 
   void retrieve(const std::string& study, const std::string& series, const std::vector<std::string>& sops,
                 const StoreFn& store, Progress& progress) override {
-    auto one = [&](const std::string& level, const std::string& sop) {
+    auto one = [&](const std::string& sop) {
       progress.check_cancelled();
       Scu scu;
       connect(scu, true);
       scu.store = &store;
       DcmDataset q;
-      q.putAndInsertOFStringArray(DCM_QueryRetrieveLevel, level.c_str());
-      q.putAndInsertOFStringArray(DCM_StudyInstanceUID, study.c_str());
-      q.putAndInsertOFStringArray(DCM_SeriesInstanceUID, series.c_str());
-      if (!sop.empty()) q.putAndInsertOFStringArray(DCM_SOPInstanceUID, sop.c_str());
+      retrieve_keys(q, study, series, sop);
       OFList<RetrieveResponse*> responses;
       const T_ASC_PresentationContextID pc =
           scu.findPresentationContextID(UID_GETStudyRootQueryRetrieveInformationModel, "");
       const OFCondition c = scu.sendCGETRequest(pc, &q, &responses);
-      Uint16 status = 0xffff;
       unsigned failed = 0;
-      if (!responses.empty()) {
-        status = responses.back()->m_status;
-        failed = responses.back()->m_numberOfFailedSubops;
-      }
-      for (auto* r : responses) delete r;
+      const Uint16 status = final_status(responses, &failed);
       scu.releaseAssociation();
       if (c.bad())
         throw PacsError(ExitCode::pacs_transfer, std::string("C-GET broke off: ") + c.text());
       if (!scu.store_error.empty())
         throw PacsError(ExitCode::pacs_transfer, "an instance received by C-GET could not be kept: " + scu.store_error);
       if (status != STATUS_Success && status != 0xff00)
-        throw PacsError(status == 0xA701 || status == 0xA702 ? ExitCode::pacs_transfer : ExitCode::pacs_transfer,
-                        "C-GET ended with status 0x" + hex4(status) + (failed ? " (" + std::to_string(failed) + " failed)" : ""),
+        throw PacsError(ExitCode::pacs_transfer, "C-GET ended with status 0x" + hex4(status) + (failed ? " (" + std::to_string(failed) + " failed)" : ""),
                         "the PACS' log says why (e.g. it cannot convert the images to an uncompressed transfer syntax)");
     };
     if (pacs_.move_port > 0) return move(study, series, sops, store, progress);
-    if (sops.empty()) return one("SERIES", "");
-    for (const auto& sop : sops) one("IMAGE", sop);
+    for_each_request(sops, one);
   }
 
   /// C-MOVE to our own C-STORE SCP: the PACS opens an association to us and stores the instances.
@@ -194,22 +211,17 @@ class DimseClient final : public Client {
     } cleanup{dir};
     MoveReceiver receiver(pacs_.calling_aet, pacs_.move_port, dir);
     receiver.start();
-    auto one = [&](const std::string& level, const std::string& sop) {
+    auto one = [&](const std::string& sop) {
       progress.check_cancelled();
       Scu scu;
       connect(scu, false, UID_MOVEStudyRootQueryRetrieveInformationModel);
       DcmDataset q;
-      q.putAndInsertOFStringArray(DCM_QueryRetrieveLevel, level.c_str());
-      q.putAndInsertOFStringArray(DCM_StudyInstanceUID, study.c_str());
-      q.putAndInsertOFStringArray(DCM_SeriesInstanceUID, series.c_str());
-      if (!sop.empty()) q.putAndInsertOFStringArray(DCM_SOPInstanceUID, sop.c_str());
+      retrieve_keys(q, study, series, sop);
       OFList<RetrieveResponse*> responses;
       const T_ASC_PresentationContextID pc =
           scu.findPresentationContextID(UID_MOVEStudyRootQueryRetrieveInformationModel, "");
       const OFCondition c = scu.sendMOVERequest(pc, pacs_.calling_aet.c_str(), &q, &responses);
-      Uint16 status = 0xffff;
-      if (!responses.empty()) status = responses.back()->m_status;
-      for (auto* r : responses) delete r;
+      const Uint16 status = final_status(responses, nullptr);
       scu.releaseAssociation();
       if (c.bad()) throw PacsError(ExitCode::pacs_transfer, std::string("C-MOVE broke off: ") + c.text());
       if (status == 0xA801)
@@ -219,9 +231,7 @@ class DimseClient final : public Client {
         throw PacsError(ExitCode::pacs_transfer, "C-MOVE ended with status 0x" + hex4(status),
                         "the PACS' log says why (it must reach us at port " + std::to_string(pacs_.move_port) + ")");
     };
-    if (sops.empty()) one("SERIES", "");
-    else
-      for (const auto& sop : sops) one("IMAGE", sop);
+    for_each_request(sops, one);
     receiver.stop();
     for (const auto& e : std::filesystem::recursive_directory_iterator(dir)) {
       if (!e.is_regular_file()) continue;

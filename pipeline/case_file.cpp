@@ -1,3 +1,6 @@
+// Case files: parsing and validating every table of a case, and its JSON form. Over 400 lines for a
+// reason: it is the one place that knows every key a case may hold and checks each against its
+// rules, so that an unknown or wrong key never falls back to a default silently.
 #include "pipeline/case_file.h"
 
 #include "core/errors.h"

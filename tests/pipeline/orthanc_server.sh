@@ -7,6 +7,7 @@
 #   orthanc_server.sh stop DIR                 stops it by PID and waits until it is gone
 # Needs Debian's orthanc, orthanc-dicomweb and orthanc-gdcm (scripts/install-deps).
 set -euo pipefail
+source "$(dirname "$0")/free_port.sh"
 cmd=${1:?usage: orthanc_server.sh start DIR USER PASSWORD | stop DIR}
 DIR=$(realpath -m "${2:?DIR}")
 alive() { [ -d "/proc/$1" ] && ! grep -q '^State:[[:space:]]*Z' "/proc/$1/status" 2>/dev/null; }
@@ -33,14 +34,6 @@ for p in libOrthancDicomWeb.so libOrthancGdcm.so; do
   [ -f "$PLUGINS/$p" ] || { echo "orthanc_server.sh: $PLUGINS/$p missing (orthanc-dicomweb, orthanc-gdcm)" >&2; exit 3; }
 done
 mkdir -p "$DIR/db"
-free_port() {
-  local p
-  for _ in $(seq 200); do
-    p=$(( 20000 + (RANDOM * 32768 + RANDOM) % 40000 ))
-    [ "$p" != "${1:-}" ] && ! ss -Htan "( sport = :$p )" | grep -q . && { echo "$p"; return; }
-  done
-  return 1
-}
 HTTP_PORT=$(free_port); DICOM_PORT=$(free_port "$HTTP_PORT")
 NAME="organsmith-test-$$-$(date +%s%N)"   # tells our server from any other on the port
 cat > "$DIR/orthanc.json" <<CONF

@@ -7,6 +7,7 @@
 # Needs Debian's slurm-wlm and munge (scripts/install-deps) and root (the daemons run as root).
 # No cgroups: processes are tracked by process group, memory by polling /proc.
 set -euo pipefail
+source "$(dirname "$0")/free_port.sh"
 cmd=${1:?usage: slurm_cluster.sh start|stop DIR}
 DIR=$(realpath -m "${2:?usage: slurm_cluster.sh start|stop DIR}")
 export SLURM_CONF=$DIR/slurm.conf
@@ -56,14 +57,6 @@ trap 'fail "start-up failed"' ERR
 
 mkdir -p "$DIR"/{munge,state,spool,log,run}
 chmod 755 "$DIR/munge"
-free_port() {  # a loopback port no socket uses
-  local p
-  for _ in $(seq 200); do
-    p=$(( 20000 + (RANDOM * 32768 + RANDOM) % 40000 ))
-    [ "$p" != "${1:-}" ] && ! ss -Htan "( sport = :$p )" | grep -q . && { echo "$p"; return; }
-  done
-  return 1
-}
 CTLD_PORT=$(free_port); SLURMD_PORT=$(free_port "$CTLD_PORT")
 HOST=$(hostname -s)
 HW=$(slurmd -C | sed -n 's/^NodeName=[^ ]* //p' | sed 's/ *RealMemory=[0-9]*//; s/ *UpTime=.*//')
