@@ -109,6 +109,8 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get(*t, organ, seen, "min_length_mm", p.min_length_mm);
     get(*t, organ, seen, "start_radius_mm", p.start_radius_mm);
     get(*t, organ, seen, "roi_margin_mm", p.roi_margin_mm);
+    get(*t, organ, seen, "max_length_mm", p.max_length_mm);
+    get(*t, organ, seen, "region_reach_mm", p.region_reach_mm);
     get(*t, organ, seen, "alpha", p.alpha);
     get(*t, organ, seen, "beta", p.beta);
     get(*t, organ, seen, "kappa", p.kappa);

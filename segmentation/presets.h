@@ -42,6 +42,8 @@ struct OrganPreset {
   double min_length_mm = 20;                  ///< airway candidates: shortest run along the body
   double start_radius_mm = 3;                 ///< radius of the initial snake, mm
   double roi_margin_mm = 30;                  ///< margin of the per-slice working window, mm
+  double max_length_mm = 140;                 ///< seeded organs: longest extent from the seed along the slices, mm
+  double region_reach_mm = 3;                 ///< seeded organs: the 3-D region continues a slice where it lies within this of the previous contour, mm
   double alpha = 0.6, beta = 0.3, kappa = 0.4, balloon = 0.5;  ///< snake (see SnakeOptions)
   double point_spacing_mm = 1.5;
   double gvf_mu = 0.2;

@@ -5,6 +5,7 @@
 #include "segmentation/edge_map.h"
 #include "segmentation/gvf.h"
 #include "segmentation/presets.h"
+#include "segmentation/region3d.h"
 #include "segmentation/slice_ops.h"
 #include "segmentation/snake.h"
 
@@ -313,9 +314,6 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     throw SegmentationError(ExitCode::bad_seed, b,
                             "place the seed inside the " + p.organ + " (not in air, fat, bone or a neighbouring organ)");
   }
-  double mu = seed_med;
-  auto window = [&](double m) { return std::pair{m - p.region_below_hu, m + p.region_above_hu}; };
-  auto [lo, hi] = window(mu);
   const double seed_margin = std::max(p.roi_margin_mm, std::sqrt(p.max_area_mm2 / M_PI) + 10.0);
   // The opening radius scales with the organ's cross-section (a fraction of its equivalent
   // radius), so that necks through which the snake could leak into a neighbour of similar HU
@@ -323,87 +321,154 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   auto open_for = [&](double area_mm2) {
     return std::max(p.region_open_mm, p.region_open_fraction * std::sqrt(area_mm2 / M_PI));
   };
-  Fit f0 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, p.region_open_mm);
-  // The organ's mean is better estimated over its whole cross-section than around the seed;
-  // refit once with the window centred on it.
-  if (f0.area_mm2 >= p.min_area_mm2) {
-    const double m2 = median_inside(c, k0, f0.pts);
-    if (std::isfinite(m2) && m2 >= p.seed_hu_lo && m2 <= p.seed_hu_hi && std::abs(m2 - mu) > 2.0) {
-      mu = m2;
-      std::tie(lo, hi) = window(mu);
-      f0 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, p.region_open_mm);
-    }
-  }
-  for (int pass = 0; pass < 2 && f0.area_mm2 >= p.min_area_mm2; ++pass) {
-    Fit f1 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, open_for(f0.area_mm2));
-    if (f1.area_mm2 < p.min_area_mm2) break;  // the opening removed the organ itself: keep the last fit
-    const bool same = std::abs(f1.area_mm2 - f0.area_mm2) < 0.02 * f0.area_mm2;
-    f0 = std::move(f1);
-    if (same) break;
-  }
-  if (f0.area_mm2 < p.min_area_mm2 || f0.area_mm2 > p.max_area_mm2) {
-    char b[256];
-    std::snprintf(b, sizeof b, "%s not found at seed %s: the contour %s (%.0f mm², expected %.0f–%.0f mm²)",
-                  p.organ.c_str(), fmt_mm(seed_lps).c_str(), f0.area_mm2 < p.min_area_mm2 ? "collapsed" : "leaked",
-                  f0.area_mm2, p.min_area_mm2, p.max_area_mm2);
-    throw SegmentationError(ExitCode::organ_not_found, b, "check that the seed lies inside the " + p.organ);
-  }
-  std::vector<SliceContour> up, down;
-  std::string note_up, note_down;
-  std::atomic<int> done{0};
   const std::int64_t K = g.size_vox[2];
-  auto propagate = [&](int dir, std::vector<SliceContour>& acc, std::string& note) {
-    std::vector<Point2> prev = f0.pts;
-    double prev_area = f0.area_mm2;
-    for (std::int64_t k = k0 + dir; k >= 0 && k < K; k += dir) {
-      progress.check_cancelled();
-      progress.report(std::min(0.99, double(++done) / 40.0), "segmenting " + p.organ);
-      // Start inside the neighbour's contour, so the pressure grows it out to this slice's edge
-      // rather than having to pull a too-large start back.
-      const std::vector<Point2> init = scaled(prev, 0.7);
-      const double m_init = median_inside(c, k, init);
-      if (!(m_init >= lo && m_init <= hi)) {
-        note = "stopped at slice " + std::to_string(k) + ": the region left the organ's HU window";
-        return;
-      }
-      Fit f = fit_slice(c, k, init, p, lo, hi, p.roi_margin_mm, open_for(prev_area));
-      if (f.area_mm2 < p.min_area_mm2) {
-        note = "stopped at slice " + std::to_string(k) + ": area collapsed";
-        return;
-      }
-      if (f.area_mm2 > p.max_area_mm2 || f.area_mm2 > p.max_area_ratio * prev_area) {
-        note = "stopped at slice " + std::to_string(k) + ": area jumped (leak into a neighbour)";
-        return;
-      }
-      if (f.edge_support < p.min_edge_support) {
-        note = "stopped at slice " + std::to_string(k) + ": edge support lost (no wall around most of the contour)";
-        return;
-      }
-      const double m = median_inside(c, k, f.pts);
-      if (!(std::abs(m - mu) <= p.max_mean_drift_hu)) {
-        note = "stopped at slice " + std::to_string(k) + ": intensity drifted from the organ's";
-        return;
-      }
-      acc.push_back({k, f.pts});
-      prev = f.pts;
-      prev_area = f.area_mm2;
-    }
-    note = std::string("reached the ") + (dir > 0 ? "last" : "first") + " slice";
+  std::atomic<int> done{0};
+  struct Attempt {
+    std::vector<SliceContour> all;
+    std::string note_up, note_down;
+    double lo = 0, hi = 0, mu = 0;
   };
-  if (parallel)
-    tbb::parallel_invoke([&] { propagate(+1, up, note_up); }, [&] { propagate(-1, down, note_down); });
-  else {
-    propagate(+1, up, note_up);
-    propagate(-1, down, note_down);
+  // One segmentation with the window centred on `mu` (refined on the seed slice when
+  // `refine_on_seed_slice`).
+  auto attempt = [&](double mu, bool refine_on_seed_slice) {
+    auto window = [&](double m) { return std::pair{m - p.region_below_hu, m + p.region_above_hu}; };
+    auto [lo, hi] = window(mu);
+    Fit f0 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, p.region_open_mm);
+    // The organ's mean is better estimated over its whole cross-section than around the seed;
+    // refit once with the window centred on it.
+    if (f0.area_mm2 >= p.min_area_mm2) {
+      const double m2 = median_inside(c, k0, f0.pts);
+      if (refine_on_seed_slice && std::isfinite(m2) && m2 >= p.seed_hu_lo && m2 <= p.seed_hu_hi &&
+          std::abs(m2 - mu) > 2.0) {
+        mu = m2;
+        std::tie(lo, hi) = window(mu);
+        f0 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, p.region_open_mm);
+      }
+    }
+    for (int pass = 0; pass < 2 && f0.area_mm2 >= p.min_area_mm2; ++pass) {
+      Fit f1 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, open_for(f0.area_mm2));
+      if (f1.area_mm2 < p.min_area_mm2) break;  // the opening removed the organ itself: keep the last fit
+      const bool same = std::abs(f1.area_mm2 - f0.area_mm2) < 0.02 * f0.area_mm2;
+      f0 = std::move(f1);
+      if (same) break;
+    }
+    if (f0.area_mm2 < p.min_area_mm2 || f0.area_mm2 > p.max_area_mm2) {
+      char b[256];
+      std::snprintf(b, sizeof b, "%s not found at seed %s: the contour %s (%.0f mm², expected %.0f–%.0f mm²)",
+                    p.organ.c_str(), fmt_mm(seed_lps).c_str(), f0.area_mm2 < p.min_area_mm2 ? "collapsed" : "leaked",
+                    f0.area_mm2, p.min_area_mm2, p.max_area_mm2);
+      throw SegmentationError(ExitCode::organ_not_found, b, "check that the seed lies inside the " + p.organ);
+    }
+    // The organ's coarse 3-D region in the same window: where the organ continues on the next
+    // slice, and the start contour there.
+    seg::Region3dOptions ro;
+    ro.lo_hu = lo;
+    ro.hi_hu = hi;
+    ro.sigma_mm = std::max(p.region_sigma_mm, p.region_sigma_px * std::min(c.sx, c.sy));
+    ro.open_mm = std::max(p.region_open_mm, std::min(c.sx, c.sy));
+    ro.half_width_mm = std::sqrt(p.max_area_mm2 / M_PI) + 20.0;
+    ro.half_length_mm = p.max_length_mm;
+    const seg::Region3d region = seg::grow_region3d(vol, std::llround(ijk.x()), std::llround(ijk.y()), k0, ro);
+    std::vector<SliceContour> up, down;
+    std::string note_up, note_down;
+    auto propagate = [&](int dir, std::vector<SliceContour>& acc, std::string& note) {
+      std::vector<Point2> prev = f0.pts;
+      double prev_area = f0.area_mm2;
+      for (std::int64_t k = k0 + dir; k >= 0 && k < K; k += dir) {
+        progress.check_cancelled();
+        progress.report(std::min(0.99, double(++done) / 40.0), "segmenting " + p.organ);
+        // Start inside the neighbour's contour, so the pressure grows it out to this slice's edge
+        // rather than having to pull a too-large start back.
+        std::vector<Point2> init = scaled(prev, 0.7);
+        // Where the 3-D region continues under the previous contour (a section that moved
+        // sideways, as a fundus does between thick slices), start from its shrunken outline.
+        const cv::Mat under = seg::region_under(region, k, prev, c.sx, c.sy, p.region_reach_mm);
+        if (!under.empty()) {
+          const double a_under = cv::countNonZero(under) * c.sx * c.sy;
+          const std::vector<Point2> outline = seg::mask_outline_mm(region, under, c.sx, c.sy);
+          if (a_under >= p.min_area_mm2 && a_under <= p.max_area_ratio * prev_area && outline.size() >= 4)
+            init = scaled(outline, 0.7);
+        }
+        const double m_init = median_inside(c, k, init);
+        if (!(m_init >= lo && m_init <= hi)) {
+          note = "stopped at slice " + std::to_string(k) + ": the region left the organ's HU window";
+          return;
+        }
+        Fit f = fit_slice(c, k, init, p, lo, hi, p.roi_margin_mm, open_for(prev_area));
+        if (f.area_mm2 < p.min_area_mm2) {
+          note = "stopped at slice " + std::to_string(k) + ": area collapsed";
+          return;
+        }
+        if (f.area_mm2 > p.max_area_mm2 || f.area_mm2 > p.max_area_ratio * prev_area) {
+          note = "stopped at slice " + std::to_string(k) + ": area jumped (leak into a neighbour)";
+          return;
+        }
+        if (f.edge_support < p.min_edge_support) {
+          note = "stopped at slice " + std::to_string(k) + ": edge support lost (no wall around most of the contour)";
+          return;
+        }
+        const double m = median_inside(c, k, f.pts);
+        if (!(std::abs(m - mu) <= p.max_mean_drift_hu)) {
+          note = "stopped at slice " + std::to_string(k) + ": intensity drifted from the organ's";
+          return;
+        }
+        acc.push_back({k, f.pts});
+        prev = f.pts;
+        prev_area = f.area_mm2;
+      }
+      note = std::string("reached the ") + (dir > 0 ? "last" : "first") + " slice";
+    };
+    if (parallel)
+      tbb::parallel_invoke([&] { propagate(+1, up, note_up); }, [&] { propagate(-1, down, note_down); });
+    else {
+      propagate(+1, up, note_up);
+      propagate(-1, down, note_down);
+    }
+    Attempt at;
+    at.all.assign(down.rbegin(), down.rend());
+    at.all.push_back({k0, f0.pts});
+    at.all.insert(at.all.end(), up.begin(), up.end());
+    at.note_up = note_up;
+    at.note_down = note_down;
+    at.lo = lo;
+    at.hi = hi;
+    at.mu = mu;
+    return at;
+  };
+  Attempt at = attempt(seed_med, true);
+  // The organ's median over every slice found is a steadier centre for the window than one
+  // slice around the seed (seeds a slice apart gave windows 6 HU apart on a real scan); a
+  // second pass with it makes the result depend less on where the seed was placed.
+  {
+    std::vector<float> v;
+    for (const auto& sc : at.all) {
+      const float* sl = vol.slice(sc.k);
+      seg::rasterise(to_px(c, sc.pts), c.W, c.H, [&](int x, int y) { v.push_back(sl[std::size_t(y) * c.W + x]); });
+    }
+    if (!v.empty()) {
+      auto mid = v.begin() + std::ptrdiff_t(v.size() / 2);
+      std::nth_element(v.begin(), mid, v.end());
+      const double m3 = *mid;
+      if (m3 >= p.seed_hu_lo && m3 <= p.seed_hu_hi && std::abs(m3 - at.mu) > 1.5) {
+        try {
+          at = attempt(m3, false);
+        } catch (const SegmentationError&) {
+          // keep the first pass
+        }
+      }
+    }
   }
-  std::vector<SliceContour> all(down.rbegin(), down.rend());
-  all.push_back({k0, f0.pts});
-  all.insert(all.end(), up.begin(), up.end());
+  const auto& all = at.all;
+  const double lo = at.lo, hi = at.hi, mu = at.mu;
+  const std::string& note_up = at.note_up;
+  const std::string& note_down = at.note_down;
   out.contours.organ = p.organ;
   for (const auto& sc : all) out.contours.contours.push_back(to_contour(vol, sc.k, sc.pts));
   out.first_slice = all.front().k;
   out.last_slice = all.back().k;
-  out.notes = {"towards k = 0: " + note_down, "towards k = " + std::to_string(K - 1) + ": " + note_up};
+  char win[128];
+  std::snprintf(win, sizeof win, "organ window %.0f to %.0f HU (median %.0f HU)", lo, hi, mu);
+  out.notes = {"towards k = 0: " + note_down, "towards k = " + std::to_string(K - 1) + ": " + note_up, win};
   return out;
 }
 

@@ -197,8 +197,9 @@ TEST(SegmentReal, GallbladderFromOneSeedAndFromSeedsMoved3mm) {
     const Score sc = score(ref, 0, r.labels, 1);
     std::printf("real gallbladder, seed (%.1f, %.1f, %.1f): Dice %.4f, volume error %+.1f %%\n", s.x(), s.y(), s.z(),
                 sc.dice, 100 * sc.volume_error);
-    EXPECT_GE(sc.dice, 0.80) << "seed " << s.transpose();
-    // Issue target |volume error| ≤ 15 % (reached: −12 % to +8 % over the 7 seeds).
+    // Issue targets: Dice ≥ 0.86 and |volume error| ≤ 15 % for every one of the 7 seeds
+    // (reached: Dice 0.879–0.888, volume −5.0 % to −2.7 %).
+    EXPECT_GE(sc.dice, 0.86) << "seed " << s.transpose();
     EXPECT_LE(std::abs(sc.volume_error), 0.15) << "seed " << s.transpose();
   }
 }
