@@ -4,6 +4,7 @@
 #include "core/buffer.h"
 #include "core/grid.h"
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -49,5 +50,19 @@ struct LabelMap {
   /// Volume of the voxels carrying `value`, in millilitres.
   double volume_ml(std::uint8_t value) const;
 };
+
+/// Storage order that puts a grid's slices across the body's long axis: order[a] is the stored
+/// axis that becomes axis a, k being the stored axis closest to S and i the remaining one closest
+/// to L. {0, 1, 2} for a volume already stored as axial (or oblique-axial) slices.
+std::array<int, 3> axial_axis_order(const ImageGrid& grid);
+
+/// The same voxels stored in another axis order (a lossless copy, see `axial_axis_order`): the
+/// grid's size, spacing and direction columns are permuted, the origin is kept, so every voxel
+/// keeps its LPS position.
+template <typename T>
+VoxelBuffer<T> permute_voxels(const VoxelBuffer<T>& in, const ImageGrid& grid, const std::array<int, 3>& order);
+ImageGrid permute_grid(const ImageGrid& grid, const std::array<int, 3>& order);
+Volume permute_axes(const Volume& v, const std::array<int, 3>& order);
+LabelMap permute_axes(const LabelMap& m, const std::array<int, 3>& order);
 
 }  // namespace organsmith

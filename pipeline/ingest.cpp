@@ -38,6 +38,15 @@ IngestResult ingest(const fs::path& input, const IngestOptions& options, Progres
                        input, "give a DICOM directory or file, or a .nii/.nii.gz/.nrrd/.nhdr/.mha/.mhd file");
     result = read_dicom(input, options, progress);
   }
+  // Every stage works on axial slices (the snake runs slice by slice across the body's long
+  // axis): a series stored as sagittal or coronal slices is reordered, voxel for voxel.
+  const std::array<int, 3> order = axial_axis_order(result.volume.grid);
+  if (order != std::array<int, 3>{0, 1, 2}) {
+    result.volume = permute_axes(result.volume, order);
+    result.report.warnings.push_back("stored as non-axial slices (axis order " + std::to_string(order[0]) + "," +
+                                     std::to_string(order[1]) + "," + std::to_string(order[2]) +
+                                     "): reordered to axial slices, every voxel at its own position");
+  }
   return result;
 }
 

@@ -86,6 +86,8 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get(*t, organ, seen, "pressure_ramp_hu", p.pressure_ramp_hu);
     get(*t, organ, seen, "region_sigma_mm", p.region_sigma_mm);
     get(*t, organ, seen, "region_sigma_px", p.region_sigma_px);
+    get(*t, organ, seen, "region_noise_hu", p.region_noise_hu);
+    get(*t, organ, seen, "region_noise_max_sigma_mm", p.region_noise_max_sigma_mm);
     get(*t, organ, seen, "region_open_mm", p.region_open_mm);
     get(*t, organ, seen, "region_open_fraction", p.region_open_fraction);
     get_range(*t, organ, seen, "edge_window_hu", p.edge_window_lo_hu, p.edge_window_hi_hu);
@@ -102,6 +104,7 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get(*t, organ, seen, "min_area_mm2", p.min_area_mm2);
     get(*t, organ, seen, "max_area_mm2", p.max_area_mm2);
     get(*t, organ, seen, "max_area_ratio", p.max_area_ratio);
+    get(*t, organ, seen, "area_ratio_span_mm", p.area_ratio_span_mm);
     get(*t, organ, seen, "max_mean_drift_hu", p.max_mean_drift_hu);
     get(*t, organ, seen, "min_fill", p.min_fill);
     get(*t, organ, seen, "max_aspect", p.max_aspect);

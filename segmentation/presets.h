@@ -21,6 +21,8 @@ struct OrganPreset {
   double pressure_ramp_hu = 8;                ///< HU over which the pressure goes from 0 to ±1
   double region_sigma_mm = 2;                 ///< smoothing before the region test, mm (at least)
   double region_sigma_px = 0;                 ///< …and at least this many pixels
+  double region_noise_hu = 0;                 ///< …and enough to bring the image's noise below this, HU; 0 = off
+  double region_noise_max_sigma_mm = 2;       ///< …but never more than this for the noise, mm (anatomy, not noise, below it)
   double region_open_mm = 0;                  ///< radius of the opening that removes thin partial-volume bands, mm
   double region_open_fraction = 0;            ///< …at least this fraction of the organ's equivalent radius
   double edge_window_lo_hu = -150, edge_window_hi_hu = 150;
@@ -36,6 +38,7 @@ struct OrganPreset {
   double edge_stop = 0;                       ///< edge-map value (0–1) at which the outward pressure halves; 0 = off
   double min_area_mm2 = 15, max_area_mm2 = 2600;  ///< per-slice lumen/organ area limits, mm²
   double max_area_ratio = 1.8;                ///< largest area ratio between neighbouring slices
+  double area_ratio_span_mm = 3;              ///< …and between slices this far apart, mm (thin slices)
   double max_mean_drift_hu = 25;              ///< propagation stops beyond this drift of the mean
   double min_fill = 0.55, max_aspect = 2.2;   ///< roundness tests of airway candidates
   double max_midline_offset_mm = 40;          ///< airway candidates: distance from the body midline

@@ -279,8 +279,28 @@ struct SliceContour {
   std::vector<Point2> pts;
 };
 
-OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, const OrganPreset& p, bool parallel,
+/// Noise of slice k in a square of half-side `half_mm` around `centre` (slice mm): the robust
+/// (median absolute) spread of differences between horizontal neighbours in soft tissue, ÷ √2.
+/// Anatomy adds little: most neighbour pairs lie inside one tissue.
+double slice_noise_hu(const SliceCtx& c, std::int64_t k, Point2 centre, double half_mm) {
+  const int x0 = std::max(0, int((centre.x - half_mm) / c.sx)), x1 = std::min(c.W - 2, int((centre.x + half_mm) / c.sx));
+  const int y0 = std::max(0, int((centre.y - half_mm) / c.sy)), y1 = std::min(c.H - 1, int((centre.y + half_mm) / c.sy));
+  const float* s = c.vol.slice(k);
+  std::vector<float> d;
+  for (int y = y0; y <= y1; ++y)
+    for (int x = x0; x <= x1; ++x) {
+      const float a = s[std::size_t(y) * c.W + x], b = s[std::size_t(y) * c.W + x + 1];
+      if (std::abs(a) < 200 && std::abs(b) < 200) d.push_back(std::abs(a - b));
+    }
+  if (d.size() < 16) return 0;
+  auto mid = d.begin() + std::ptrdiff_t(d.size() / 2);
+  std::nth_element(d.begin(), mid, d.end());
+  return 1.4826 * double(*mid) / std::sqrt(2.0);
+}
+
+OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, const OrganPreset& preset, bool parallel,
                                  Progress& progress) {
+  OrganPreset p = preset;  // region smoothing adapts to the image below
   const ImageGrid& g = vol.grid;
   SliceCtx c(vol);
   OrganSegmentation out;
@@ -305,6 +325,14 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
                             p.organ + " seed " + fmt_mm(seed_lps) + " lies outside the image",
                             "give a seed inside the image (see `organsmith info` for its extent)");
   const Point2 s = to_slice_mm(c, ijk);
+  // Smoothing before the region test grows with the image's noise (a Gaussian of σ pixels leaves
+  // noise / (2√π σ) of white noise) until what is left is below region_noise_hu, so that the
+  // pressure's sign is the tissue's and not the noise's, at any pixel size and dose.
+  const double noise_hu = slice_noise_hu(c, k0, s, 40.0);
+  if (p.region_noise_hu > 0 && noise_hu > 0)
+    p.region_sigma_px = std::max(p.region_sigma_px,
+                                 std::min(noise_hu / (2.0 * std::sqrt(M_PI) * p.region_noise_hu),
+                                          p.region_noise_max_sigma_mm / std::min(c.sx, c.sy)));
   // What the seed's neighbourhood looks like decides the organ's window.
   const double seed_med = median_inside(c, k0, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24));
   if (!(seed_med >= p.seed_hu_lo && seed_med <= p.seed_hu_hi)) {
@@ -374,6 +402,10 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     auto propagate = [&](int dir, std::vector<SliceContour>& acc, std::string& note) {
       std::vector<Point2> prev = f0.pts;
       double prev_area = f0.area_mm2;
+      // Areas of the slices behind, for the leak test over at least area_ratio_span_mm (thin slices
+      // let a leak grow by a few per cent a slice, each step under the ratio).
+      std::vector<double> areas{f0.area_mm2};
+      const std::size_t span = std::size_t(std::max(1.0, std::floor(p.area_ratio_span_mm / g.spacing_mm.z() + 1e-9)));
       for (std::int64_t k = k0 + dir; k >= 0 && k < K; k += dir) {
         progress.check_cancelled();
         progress.report(std::min(0.99, double(++done) / 40.0), "segmenting " + p.organ);
@@ -383,8 +415,9 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         // Where the 3-D region continues under the previous contour (a section that moved
         // sideways, as a fundus does between thick slices), start from its shrunken outline.
         const cv::Mat under = seg::region_under(region, k, prev, c.sx, c.sy, p.region_reach_mm);
+        double a_under = 0;
         if (!under.empty()) {
-          const double a_under = cv::countNonZero(under) * c.sx * c.sy;
+          a_under = cv::countNonZero(under) * c.sx * c.sy;
           const std::vector<Point2> outline = seg::mask_outline_mm(region, under, c.sx, c.sy);
           if (a_under >= p.min_area_mm2 && a_under <= p.max_area_ratio * prev_area && outline.size() >= 4)
             init = scaled(outline, 0.7);
@@ -399,11 +432,16 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
           note = "stopped at slice " + std::to_string(k) + ": area collapsed";
           return;
         }
-        if (f.area_mm2 > p.max_area_mm2 || f.area_mm2 > p.max_area_ratio * prev_area) {
+        const double base_area = areas[areas.size() > span ? areas.size() - span : 0];
+        if (f.area_mm2 > p.max_area_mm2 || f.area_mm2 > p.max_area_ratio * prev_area ||
+            f.area_mm2 > p.max_area_ratio * base_area) {
           note = "stopped at slice " + std::to_string(k) + ": area jumped (leak into a neighbour)";
           return;
         }
-        if (f.edge_support < p.min_edge_support) {
+        // A wall that is not visible all round (bile against liver of close HU on a noisy scan)
+        // ends the organ only where its 3-D region ends too.
+        const bool region_goes_on = a_under >= 0.5 * f.area_mm2 && a_under <= p.max_area_ratio * prev_area;
+        if (f.edge_support < p.min_edge_support && !region_goes_on) {
           note = "stopped at slice " + std::to_string(k) + ": edge support lost (no wall around most of the contour)";
           return;
         }
@@ -415,6 +453,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         acc.push_back({k, f.pts});
         prev = f.pts;
         prev_area = f.area_mm2;
+        areas.push_back(f.area_mm2);
       }
       note = std::string("reached the ") + (dir > 0 ? "last" : "first") + " slice";
     };
@@ -466,8 +505,9 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   for (const auto& sc : all) out.contours.contours.push_back(to_contour(vol, sc.k, sc.pts));
   out.first_slice = all.front().k;
   out.last_slice = all.back().k;
-  char win[128];
-  std::snprintf(win, sizeof win, "organ window %.0f to %.0f HU (median %.0f HU)", lo, hi, mu);
+  char win[192];
+  std::snprintf(win, sizeof win, "organ window %.0f to %.0f HU (median %.0f HU); noise %.0f HU, region smoothing %.2f px",
+                lo, hi, mu, noise_hu, std::max(p.region_sigma_mm / std::min(c.sx, c.sy), p.region_sigma_px));
   out.notes = {"towards k = 0: " + note_down, "towards k = " + std::to_string(K - 1) + ": " + note_up, win};
   return out;
 }

@@ -1,0 +1,56 @@
+#pragma once
+// Variants of a scan for the robustness sweep: the CT, its reference label and the seed moved
+// through the same change, so a segmentation of the variant can be scored against the equally
+// changed reference. Physical changes (slice thickness, field of view, tilt, noise) change the
+// voxels; storage changes (RAS order, sagittal slices) keep every voxel at its LPS position.
+
+#include "core/volume.h"
+
+#include <Eigen/Core>
+
+#include <cstdint>
+#include <string>
+
+namespace organsmith::testing {
+
+struct Scan {
+  Volume ct;
+  LabelMap ref;                  ///< on ct's grid; nonzero = the organ
+  Eigen::Vector3d seed_lps_mm;   ///< a seed inside the organ (unused for the trachea)
+};
+
+/// Slices `slice_mm` apart over the same extent: thicker slices average the HU over their
+/// thickness (as a scanner reconstructing thick slices does), thinner ones interpolate linearly;
+/// the reference is interpolated the same way and thresholded at one half.
+Scan resample_slices(const Scan& s, double slice_mm);
+
+/// The field of view cut across the organ: keeps the slices from one end of the volume to the
+/// organ's slice at `fraction` of its extent (0 = its lowest-k slice) so that the organ touches
+/// the volume's last slice (`keep_low_k`) or its first one; the seed moves to the kept part.
+Scan crop_through_organ(const Scan& s, double fraction, bool keep_low_k);
+
+/// Stored in RAS order: i and j reversed, same voxels at the same positions.
+Scan stored_ras(const Scan& s);
+
+/// Stored as sagittal slices (k along the patient's left–right axis), same voxels.
+Scan stored_sagittal(const Scan& s);
+
+/// The grid turned by `degrees` about the patient's L axis through the volume's centre (an
+/// oblique acquisition): the anatomy, the reference and the seed turn with it.
+Scan tilted(const Scan& s, double degrees);
+
+/// Gaussian noise of `sigma_hu` added to every voxel (fixed random seed).
+Scan with_noise(const Scan& s, double sigma_hu, unsigned seed);
+
+/// A voxel of the reference near its end along its longest axis (`which` = −1 or +1), at least
+/// `depth_mm` inside it where possible: a seed in the neck or the fundus.
+Eigen::Vector3d seed_near_end(const Scan& s, int which, double depth_mm);
+
+/// Dice and relative volume error of a label map against the scan's reference (voxels matched
+/// through their LPS positions, so any storage order compares).
+struct Score {
+  double dice = 0, volume_error = 0;
+};
+Score score_against(const LabelMap& ref, const LabelMap& test, std::uint8_t test_label);
+
+}  // namespace organsmith::testing
