@@ -212,12 +212,7 @@ TEST(SegmentReal, TracheaWithoutSeedOn8mmChestCt) {
   const SegmentationResult r = segment_organs(v, {{"trachea", {}, {}}}, {}, np);
   const Score sc = score(ref, 0, r.labels, 2);
   std::printf("real trachea: Dice %.4f, volume error %+.1f %%\n", sc.dice, 100 * sc.volume_error);
-  // Issue target: Dice ≥ 0.90. Reached: 0.885. On the reference's own slices (20–27) the
-  // contours match the reference's −500 HU lumen to within 1 % of its voxels (FN 28, FP ≈ 30 of
-  // 2580); the whole difference is the two most cranial slices (28–29, at the lung apices and
-  // the thyroid, above the first ribs), where the round, ringed midline air lumen continues
-  // and is segmented as trachea, but the reference has none. Nothing in those slices marks
-  // them as larynx (the scan starts below the cricoid), so they are not cut. The test holds
-  // what is reached; see the issue report.
-  EXPECT_GE(sc.dice, 0.88);
+  // The reference now covers the two cranial slices it had missed (cervical trachea). Issue 15
+  // keeps the trachea at Dice ≥ 0.97; reached 0.995.
+  EXPECT_GE(sc.dice, 0.97);
 }
