@@ -12,6 +12,7 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <stdexcept>
 #include <string>
 #include <utility>
 #include <vector>
@@ -51,6 +52,13 @@ struct Mesh3Criteria {
   double perturb_bound_deg = 0.0;     ///< > 0: sliver perturbation towards this dihedral angle (tets)
   double exude_bound_deg = 0.0;       ///< > 0: sliver exudation towards this dihedral angle (tets)
   double optimiser_seconds = 30.0;    ///< time limit of perturbation and exudation each (0 = none)
+  std::size_t max_vertices = 0;       ///< refinement stops with MeshBudgetExceeded beyond this many vertices; 0 = none
+};
+
+/// Mesh_3 refinement reached Mesh3Criteria::max_vertices: the criteria cannot be met at a sane
+/// size on this input (a surface with creases the facet distance keeps refining, for one).
+struct MeshBudgetExceeded : std::runtime_error {
+  using std::runtime_error::runtime_error;
 };
 
 /// Surface between label 0 and the rest of `f` inside `box`, sampled by CGAL Mesh_3

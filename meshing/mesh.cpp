@@ -1,5 +1,5 @@
 // Over 400 lines: the one place that orders the steps of the three mesh models (wall and body,
-// tube, solid) and checks their inputs.
+// tube, solid), checks their inputs and applies the remedies when a gate fails.
 // Orchestration of the meshing stage: per organ, prepare the smoothed field, sample and remesh
 // the surfaces, build the wall bodies and tetrahedra, and measure everything. No CGAL here.
 
@@ -275,6 +275,44 @@ bool inside(const Box& b, const Eigen::Vector3d& q) {
   return (q.array() >= b.lo.array()).all() && (q.array() <= b.hi.array()).all();
 }
 
+/// Most vertices a Mesh_3 run for an organ of `volume_mm3` may insert: ten times what the organ
+/// filled with tetrahedra of edge `edge_mm` holds, and at least 20 000. A run that would pass it
+/// is chasing a criterion it cannot meet (the facet distance along the rim where the field of
+/// view cuts the organ, or along the creases of thick slices) and would run for hours.
+std::size_t vertex_budget(double volume_mm3, double edge_mm) {
+  return std::size_t(20000.0 + 10.0 * volume_mm3 / (edge_mm * edge_mm * edge_mm));
+}
+
+/// Runs `mesh` with the criteria; when it passes its vertex budget, again with the facet distance
+/// doubled (`retries` times at most), saying so in `notes`. The last failure is rethrown.
+template <class Fn>
+auto with_looser_distance(Mesh3Criteria c, std::vector<std::string>& notes, const std::string& what, int retries,
+                          Fn&& mesh) {
+  for (int attempt = 0;; ++attempt) {
+    try {
+      return mesh(c);
+    } catch (const MeshBudgetExceeded& e) {
+      if (attempt == retries) throw;
+      notes.push_back(what + ": Mesh_3 " + e.what() + "; remedied with the facet distance doubled");
+      c.facet_distance_mm *= 2;
+    }
+  }
+}
+
+/// Tetrahedra inside a closed surface (grid frame; sharp rims protected), each tetrahedron's
+/// region from `region_at` its centroid.
+template <class RegionAt>
+TetMesh polyhedral_with_regions(const SurfaceMesh& closed, Mesh3Criteria c, RegionAt&& region_at) {
+  c.max_vertices = 0;  // the polyhedral domain follows the rims it protects
+  TetMesh m = mesh3_tets_polyhedral(closed, 0, 80.0, c);
+  for (std::size_t e = 0; e < m.tets.size(); ++e) {
+    Eigen::Vector3d centre = Eigen::Vector3d::Zero();
+    for (int v = 0; v < 4; ++v) centre += m.vertices_lps_mm[std::size_t(m.tets[e][std::size_t(v)])] / 4.0;
+    m.region_ids[e] = region_at(centre);
+  }
+  return m;
+}
+
 SurfaceMesh make_surface(const LabelFunction& f, const Prepared& p, const MeshOptions& o, bool any_cut,
                          std::vector<std::string>& notes, Timeline& tl, const std::string& name) {
   Mesh3Criteria c;
@@ -292,10 +330,17 @@ SurfaceMesh make_surface(const LabelFunction& f, const Prepared& p, const MeshOp
   // time, the volume error still half of its 3 % bound, HD95 a tenth of the voxel diagonal.
   c.facet_distance_mm = 0.15 * o.edge_mm;
   c.facet_angle_deg = 30.0;
+  c.max_vertices = vertex_budget(p.label_volume_mm3, o.edge_mm);
   SurfaceMesh s;
   {
     Timeline::Scope step{tl, name + ": Mesh_3"};
-    s = mesh3_surface(f, p.domain, c);
+    try {
+      s = with_looser_distance(c, notes, name, 2, [&](const Mesh3Criteria& cc) { return mesh3_surface(f, p.domain, cc); });
+    } catch (const MeshBudgetExceeded& e) {
+      throw MeshInputError(name + ": Mesh_3 " + e.what() + ", also with a looser facet distance",
+                           "the organ's surface has creases no mesh of this edge length follows; try a larger "
+                           "--edge-mm, or check the label map (thick slices, a flat slab)");
+    }
   }
   if (any_cut) {
     Timeline::Scope step{tl, name + ": clip"};
@@ -444,6 +489,7 @@ OrganMesh mesh_one(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOpti
     // No time limit: a time-limited optimiser stops at a point that depends on the machine's
     // load, and the output would no longer be reproducible. Both stop by themselves.
     c.optimiser_seconds = 0.0;
+    c.max_vertices = vertex_budget(p.label_volume_mm3, c.cell_size_mm);
     if (spec.model == OrganModel::tube) {
       out.volume = mesh3_tets_polyhedral(tube_wall, kRegionTracheaWall, 60.0, c);
       out.region_names[kRegionTracheaWall] = spec.name + "_wall";
@@ -452,13 +498,36 @@ OrganMesh mesh_one(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOpti
         if (!inside(clip, q) || F.sample(q) < iso) return 0;
         return sdf.sample(q) <= -t ? int(kRegionGallbladderBody) : int(kRegionGallbladderWall);
       };
-      out.volume = mesh3_tets_implicit(regions, p.domain, c);
+      try {
+        out.volume = with_looser_distance(c, out.warnings, spec.name + " tetrahedra", 1, [&](const Mesh3Criteria& cc) {
+          return mesh3_tets_implicit(regions, p.domain, cc);
+        });
+      } catch (const MeshBudgetExceeded& e) {
+        // The implicit domain rounds no rim: where the field of view cuts the organ, refinement
+        // chases the sharp rim of the flat cap. The organ's own closed surface, with that rim
+        // protected as a sharp feature, is meshed instead, and each tetrahedron takes the region
+        // its centroid lies in (the wall/body boundary then follows the tetrahedra, within an
+        // edge of the inner wall surface).
+        out.warnings.push_back(spec.name + ": tetrahedra from its closed surface with sharp rims protected (" +
+                               e.what() + " in the implicit domain); the wall/body boundary follows the tetrahedra");
+        out.volume = polyhedral_with_regions(outer, c, [&](const Eigen::Vector3d& q) {
+          return sdf.sample(q) <= -t ? int(kRegionGallbladderBody) : int(kRegionGallbladderWall);
+        });
+      }
       out.region_names[kRegionGallbladderBody] = spec.name + "_body";
       out.region_names[kRegionGallbladderWall] = spec.name + "_wall";
     } else {
       const int region = kRegionSolidBase + spec.label;
       const LabelFunction solid = [&](const Eigen::Vector3d& q) { return inside(clip, q) && F.sample(q) >= iso ? region : 0; };
-      out.volume = mesh3_tets_implicit(solid, p.domain, c);
+      try {
+        out.volume = with_looser_distance(c, out.warnings, spec.name + " tetrahedra", 1, [&](const Mesh3Criteria& cc) {
+          return mesh3_tets_implicit(solid, p.domain, cc);
+        });
+      } catch (const MeshBudgetExceeded& e) {
+        out.warnings.push_back(spec.name + ": tetrahedra from its closed surface with sharp rims protected (" +
+                               e.what() + " in the implicit domain)");
+        out.volume = polyhedral_with_regions(outer, c, [&](const Eigen::Vector3d&) { return region; });
+      }
       out.region_names[region] = spec.name;
     }
     const TetImproveStats fix = improve_tets(out.volume, o.min_dihedral_deg, o.max_radius_edge);
@@ -483,6 +552,57 @@ OrganMesh mesh_one(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOpti
 }
 
 }  // namespace
+
+std::size_t failure_count(const OrganMesh& m) {
+  std::size_t n = m.volume_quality.failures.size();
+  for (const auto& s : m.surfaces) n += s.quality.failures.size();
+  return n;
+}
+
+std::string failure_text(const OrganMesh& m) {
+  std::string t;
+  for (const auto& s : m.surfaces)
+    for (const auto& f : s.quality.failures) t += (t.empty() ? "" : "; ") + s.name + ": " + f;
+  for (const auto& f : m.volume_quality.failures) t += (t.empty() ? "" : "; ") + m.spec.name + " tetrahedra: " + f;
+  return t;
+}
+
+/// Meshes one organ; where a gate fails, tries the remedies in turn — a smoother iso-surface
+/// (σ × 1.6, up to 2.5 mm along thick slices: the staircase of thin or thick slices is what
+/// leaves narrow triangles), a finer edge (× 0.8; a coarse polygon loses a thin tube's volume),
+/// then both — and keeps the first mesh that passes every gate, else the one with the fewest
+/// failures. What was tried, and which mesh was kept, is in its warnings.
+OrganMesh mesh_with_remedies(const LabelMap& labels, const MeshOrganSpec& spec, const MeshOptions& options,
+                             Progress& progress, std::chrono::steady_clock::time_point started) {
+  OrganMesh best = mesh_one(labels, spec, options, progress, started);
+  if (failure_count(best) == 0 || options.quality_remedies <= 0) return best;
+  std::vector<std::string> tried{"gates failed at first (" + failure_text(best) + ")"};
+  MeshOptions o = options;
+  std::string kept = "the first mesh";
+  for (int r = 0; r < options.quality_remedies; ++r) {
+    progress.check_cancelled();
+    const bool smoother = r != 1, finer = r >= 1;
+    o.smoothing_sigma_vox = options.smoothing_sigma_vox * (smoother ? 1.6 : 1.0);
+    o.max_smoothing_sigma_mm = smoother ? std::max(options.max_smoothing_sigma_mm, 2.5) : options.max_smoothing_sigma_mm;
+    o.edge_mm = options.edge_mm * (finer ? 0.8 : 1.0);
+    std::string what = smoother ? "smoother surface (σ " + fmt(o.smoothing_sigma_vox) + " voxel)" : std::string();
+    if (finer) what += std::string(smoother ? " and " : "") + "edge " + fmt(o.edge_mm) + " mm";
+    OrganMesh m;
+    try {
+      m = mesh_one(labels, spec, o, progress, started);
+    } catch (const MeshInputError& e) {
+      tried.push_back("remedy " + what + " failed: " + e.message());
+      continue;
+    }
+    const std::size_t n = failure_count(m);
+    tried.push_back("remedy " + what + ": " + (n == 0 ? std::string("every gate passes") : failure_text(m)));
+    if (n < failure_count(best)) best = std::move(m), kept = "the remedy " + what;
+    if (n == 0) break;
+  }
+  tried.push_back("kept " + kept);
+  for (auto& t : tried) best.warnings.push_back(spec.name + ": " + t);
+  return best;
+}
 
 OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Progress& progress) {
   if (labels.grid.voxel_count() == 0 || labels.labels.size() == 0)
@@ -545,7 +665,7 @@ OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Prog
     // random generator.
     tbb::this_task_arena::isolate([&] {
       try {
-        meshed[i] = mesh_one(labels, present[i], options, progress, started);
+        meshed[i] = mesh_with_remedies(labels, present[i], options, progress, started);
       } catch (const MeshInputError& e) {  // name the organ: the deep steps do not know it
         errors[i] = std::make_exception_ptr(MeshInputError(present[i].name + ": " + e.message(), e.hint()));
       } catch (...) {

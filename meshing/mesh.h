@@ -53,6 +53,7 @@ struct MeshOptions {
   double min_dihedral_deg = 10.0;    ///< quality gate: every tet's smallest dihedral angle (deg)
   double max_radius_edge = 2.0;      ///< quality gate: every tet's circumradius / shortest edge
   bool enforce_quality = true;       ///< throw MeshQualityError when a gate fails (else only report)
+  int quality_remedies = 3;          ///< an organ failing a gate is meshed again this many times at most: smoother, finer, both
   bool skip_absent = true;           ///< an organ absent from the label map is skipped with a warning
 };
 

@@ -9,6 +9,7 @@
 #include <CGAL/Labeled_mesh_domain_3.h>
 #include <CGAL/Mesh_complex_3_in_triangulation_3.h>
 #include <CGAL/Mesh_criteria_3.h>
+#include <CGAL/Mesh_error_code.h>
 #include <CGAL/Mesh_triangulation_3.h>
 #include <CGAL/make_mesh_3.h>
 
@@ -122,12 +123,21 @@ C3t3 run_mesh3(const LabelFunction& f, const Box& box, const Mesh3Criteria& c, b
   const CGAL::Bbox_3 bbox(box.lo.x(), box.lo.y(), box.lo.z(), box.hi.x(), box.hi.y(), box.hi.z());
   const double diag = (box.hi - box.lo).norm();
   SeededDomain domain(f, bbox, 1e-6, &rng, find_seeds(f, box, std::max(0.5 * c.facet_size_mm, 0.25)));
+  CGAL::Mesh_error_code error = CGAL::CGAL_MESH_3_NO_ERROR;
+  auto throw_budget = [&] {
+    throw MeshBudgetExceeded("refinement passed " + std::to_string(c.max_vertices) + " vertices (facet distance " +
+                             std::to_string(c.facet_distance_mm) + " mm)");
+  };
   if (cells) {
     Criteria criteria(params::facet_angle = c.facet_angle_deg, params::facet_size = c.facet_size_mm,
                       params::facet_distance = c.facet_distance_mm,
                       params::facet_topology = CGAL::FACET_VERTICES_ON_SAME_SURFACE_PATCH,
                       params::cell_radius_edge_ratio = c.cell_radius_edge, params::cell_size = c.cell_size_mm);
-    C3t3 c3t3 = CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(), params::no_exude());
+    C3t3 c3t3 = CGAL::make_mesh_3<C3t3>(
+        domain, criteria, params::no_perturb(), params::no_exude(),
+        params::mesh_3_options(params::maximal_number_of_vertices = c.max_vertices,
+                               params::pointer_to_error_code = &error));
+    if (error == CGAL::CGAL_MESH_3_MAXIMAL_NUMBER_OF_VERTICES_REACHED) throw_budget();
     optimise(c3t3, domain, c);
     return c3t3;
   }
@@ -135,7 +145,11 @@ C3t3 run_mesh3(const LabelFunction& f, const Box& box, const Mesh3Criteria& c, b
   Criteria criteria(params::facet_angle = c.facet_angle_deg, params::facet_size = c.facet_size_mm,
                     params::facet_distance = c.facet_distance_mm,
                     params::facet_topology = CGAL::FACET_VERTICES_ON_SAME_SURFACE_PATCH);
-  return CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(), params::no_exude(), params::manifold());
+  C3t3 c3t3 = CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(), params::no_exude(), params::manifold(),
+                                      params::mesh_3_options(params::maximal_number_of_vertices = c.max_vertices,
+                                                             params::pointer_to_error_code = &error));
+  if (error == CGAL::CGAL_MESH_3_MAXIMAL_NUMBER_OF_VERTICES_REACHED) throw_budget();
+  return c3t3;
 }
 
 Eigen::Vector3d to_eigen(const Tr& tr, const Tr::Vertex_handle v) {

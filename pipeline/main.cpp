@@ -146,9 +146,10 @@ void list_written(const RunSummary& summary) {
 }
 
 int cmd_run(const std::string& case_path, const std::string& out, bool force, const std::string& until,
-            const IngestFlags& flags) {
+            bool allow_quality_failures, const IngestFlags& flags) {
   CaseFile c = case_path.empty() ? default_case() : load_case_file(case_path);
   if (!out.empty()) c.out_dir = out;
+  if (allow_quality_failures) c.stages.mesh.quality_gate = "report";
   flags.apply(c.ingest);
   spdlog::info("case '{}': {} → {}", c.name, c.synthesize_phantom ? std::string("synthetic phantom") : c.input.string(),
                fs::absolute(c.out_dir).string());
@@ -209,7 +210,7 @@ int main(int argc, char** argv) {
 
   // run
   std::string case_path, run_out, until;
-  bool force = false, print_default = false;
+  bool force = false, print_default = false, allow_quality_failures = false;
   IngestFlags run_flags;
   auto* run = app.add_subcommand("run", "Run every stage of a case (TOML). Without a case file, runs the embedded\n"
                                         "default: the phantom, written to out/phantom/, then each stage into out/.\n"
@@ -217,6 +218,10 @@ int main(int argc, char** argv) {
   run->add_option("CASE", case_path, "case file (see README.md, 'Case file')");
   run->add_option("--out", run_out, "output directory (overrides the case's [output] dir)");
   run->add_flag("--force", force, "redo every stage even when unchanged");
+  run->add_flag("--allow-quality-failures", allow_quality_failures,
+                "write meshes that still fail a quality gate after meshing's remedies, with warnings "
+                "(default: stop with exit 61 naming organ, surface and figure; the case's [stages.mesh] "
+                "quality_gate = \"report\" does the same)");
   run->add_option("--until", until, "stop after this stage (phantom, ingest, segment, …)");
   run->add_flag("--print-default-case", print_default,
                 "print the embedded default case with every stage option, its default and unit, and exit");
@@ -248,7 +253,7 @@ int main(int argc, char** argv) {
         std::cout << default_case_with_options_text();
         return 0;
       }
-      return cmd_run(case_path, run_out, force, until, run_flags);
+      return cmd_run(case_path, run_out, force, until, allow_quality_failures, run_flags);
     }
     for (const auto& c : commands)
       if (c.sub->parsed()) return c.run();

@@ -211,7 +211,8 @@ class Runner {
     for (const auto& o : case_.organs) options.organs.push_back(mesh_spec(case_.registry.at(o.name), mo.wall_mm));
     options.edge_mm = mo.edge_mm;
     options.tetrahedra = mo.tetrahedra;
-    // "report" (the default): a failing figure is a warning and quality.json records it.
+    // "enforce" (the default): a figure still failing after the remedies stops the run (exit 61);
+    // "report": it is a warning and quality.json records it.
     options.enforce_quality = mo.quality_gate == "enforce";
     OrganMeshes meshes = mesh_organs(labels, options, progress_);
     for (const auto& w : meshes.warnings) spdlog::warn("mesh: {}", w);

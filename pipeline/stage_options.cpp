@@ -43,7 +43,8 @@ void visit(Visitor& v, MeshStageOptions& o) {
   v.subset("formats", o.formats, all_mesh_formats(), "export formats");
   v.boolean("ras", o.ras, "write RAS instead of LPS coordinates");
   v.choice("quality_gate", o.quality_gate, {"report", "enforce"},
-           "a mesh missing its quality gate: report (warn, quality.json) or enforce (stop, exit 61)");
+           "a mesh still missing a quality gate after meshing's remedies: enforce (stop, exit 61; default) or report "
+           "(warn, quality.json)");
   v.boolean("linear_tets", o.linear_tets, "linear tetrahedra (C3D4/tet4) instead of quadratic (C3D10/tet10)");
   v.per_organ("pressure_kPa", o.pressure_kPa, 0.0, 100.0, "kPa",
               "lumen pressure of the organ's load step, e.g. { trachea = 1.0 }; {} = gallbladder 1.5, trachea 2.0");

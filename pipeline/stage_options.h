@@ -23,9 +23,10 @@ struct MeshStageOptions {
   bool tetrahedra = true;             ///< also build tetrahedral meshes (default true)
   std::vector<std::string> formats;   ///< export formats (default: all, see meshing/export.h)
   bool ras = false;                   ///< write RAS instead of LPS coordinates (default false)
-  /// "report": a mesh missing its quality gate is written with warnings and quality.json says
-  /// which figure failed; "enforce": the run stops with exit 61 (as `organsmith mesh` does).
-  std::string quality_gate = "report";
+  /// "enforce" (default): a mesh still missing a quality gate after meshing's remedies stops the
+  /// run with exit 61 naming organ, surface and figure (as `organsmith mesh` does); "report": it is
+  /// written with warnings and quality.json says which figure failed (`run --allow-quality-failures`).
+  std::string quality_gate = "enforce";
   /// Linear tetrahedra (C3D4 / tet4) in the volume files instead of quadratic ones (default false).
   bool linear_tets = false;
   /// Lumen pressure of an organ's load step in the solver files, kPa, e.g. { trachea = 1.0 }; an

@@ -57,13 +57,20 @@ TEST(RunOptions, StageOptionsTakeEffectAndAChangeRerunsOnlyWhatFollowsIt) {
   std::string log;
   ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out) + " --until guide", &log), 0) << log;
 
-  // edge_mm = 3: every surface's mean edge within 3 mm ± 25 %.
+  // edge_mm = 3: every surface's mean edge within 3 mm ± 25 % — or within 25 % of the finer edge
+  // of the remedy meshing kept for an organ whose first mesh missed a gate (its warnings say so).
   for (const char* organ : {"gallbladder", "trachea"}) {
     const auto qj = read_json(out / "meshes" / organ / "quality.json");
     ASSERT_FALSE(qj["surfaces"].empty()) << organ;
+    double edge = 3.0;
+    for (const auto& w : qj["warnings"]) {
+      const std::string t = w.get<std::string>();
+      const auto kept = t.find("kept the remedy"), at = t.find("edge ", t.find("kept the remedy") + 1);
+      if (kept != std::string::npos && at != std::string::npos) edge = std::stod(t.substr(at + 5));
+    }
     for (const auto& [name, s] : qj["surfaces"].items()) {
       const double mean = s["edge_length_mm"]["mean"].get<double>();
-      EXPECT_NEAR(mean, 3.0, 0.75) << organ << " " << name;
+      EXPECT_NEAR(mean, edge, 0.25 * edge) << organ << " " << name;
     }
   }
   // formats: only the three asked for.

@@ -11,6 +11,7 @@
 #include "pipeline/ingest.h"
 #include "pipeline/phantom.h"
 #include "scan_variants.h"
+#include "meshing/mesh.h"
 #include "segmentation/segment.h"
 
 #include <gtest/gtest.h>
@@ -242,4 +243,81 @@ TEST(SegmentSweep, IngestReordersASagittalSeriesToAxialSlices) {
   EXPECT_TRUE(std::equal(r.volume.hu.begin(), r.volume.hu.end(), base.ct.hu.begin()));
   ASSERT_FALSE(r.report.warnings.empty());
   EXPECT_NE(r.report.warnings.back().find("reordered to axial"), std::string::npos);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Meshes of the sweep's variants: what `run` meshes from each segmentation must pass every gate
+// (surface guarantees, tetrahedral quality) after meshing's own remedies.
+
+namespace {
+
+struct MeshRow {
+  std::string failures;  ///< empty = every gate passed
+  std::string remedies;
+  double seconds = 0;
+};
+
+MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string& organ, bool seeded) {
+  const Scan s = as_ingested(raw);
+  NullProgress np;
+  OrganRequest req{organ, {}, {}};
+  if (seeded) req.seed_lps_mm = s.seed_lps_mm;
+  const SegmentationResult seg = segment_organs(s.ct, {req}, {}, np);
+  MeshOptions mo;
+  mo.organs.clear();
+  for (const auto& spec : default_organs())
+    if (spec.name == organ) mo.organs.push_back(spec);
+  mo.enforce_quality = false;
+  MeshRow row;
+  const auto t0 = std::chrono::steady_clock::now();
+  try {
+    const OrganMeshes m = mesh_organs(seg.labels, mo, np);
+    for (const auto& o : m.organs) {
+      for (const auto& surf : o.surfaces)
+        for (const auto& f : surf.quality.failures) row.failures += surf.name + ": " + f + "; ";
+      for (const auto& f : o.volume_quality.failures) row.failures += o.spec.name + " tetrahedra: " + f + "; ";
+      for (const auto& w : o.warnings)
+        if (w.find("remed") != std::string::npos) row.remedies += w + "; ";
+    }
+  } catch (const std::exception& e) {
+    row.failures = std::string("error: ") + e.what();
+  }
+  row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  std::printf("| %-12s | %-22s | %s | %5.1f s | %s\n", organ.c_str(), name.c_str(),
+              row.failures.empty() ? "all gates pass" : row.failures.c_str(), row.seconds, row.remedies.c_str());
+  std::fflush(stdout);
+  return row;
+}
+
+}  // namespace
+
+TEST(MeshSweep, RealTracheaVariantsPassEveryGate) {
+  ORGANSMITH_REQUIRE_REAL_DATA();
+  const Scan base = real_scan("chest-dicom-8mm/dicom", "chest-dicom-8mm/trachea-reference.nii.gz");
+  std::vector<std::pair<std::string, Scan>> v{{"unchanged", base},
+                                              {"1.0 mm slices", resample_slices(base, 1.0)},
+                                              {"2.0 mm slices", resample_slices(base, 2.0)},
+                                              {"5.0 mm slices", resample_slices(base, 5.0)},
+                                              {"cut at high-k edge", crop_through_organ(base, 0.6, true)},
+                                              {"oblique 10 deg", tilted(base, 10.0)}};
+  for (const auto& [name, s] : v) {
+    const MeshRow r = mesh_variant(name, s, "trachea", false);
+    EXPECT_TRUE(r.failures.empty()) << name << ": " << r.failures;
+  }
+}
+
+TEST(MeshSweep, RealGallbladderVariantsPassEveryGate) {
+  ORGANSMITH_REQUIRE_REAL_DATA();
+  Scan base = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/gallbladder-reference.nii.gz");
+  base.seed_lps_mm = central_seed(base);
+  std::vector<std::pair<std::string, Scan>> v{{"unchanged", base},
+                                              {"1.0 mm slices", resample_slices(base, 1.0)},
+                                              {"5.0 mm slices", resample_slices(base, 5.0)},
+                                              {"cut at high-k edge", crop_through_organ(base, 0.6, true)},
+                                              {"cut at low-k edge", crop_through_organ(base, 0.4, false)},
+                                              {"oblique 10 deg", tilted(base, 10.0)}};
+  for (const auto& [name, s] : v) {
+    const MeshRow r = mesh_variant(name, s, "gallbladder", true);
+    EXPECT_TRUE(r.failures.empty()) << name << ": " << r.failures;
+  }
 }
