@@ -39,7 +39,11 @@ class HapticsCli : public ::testing::Test {
     fs::create_directories(dir_);
     std::ofstream(dir_ / "small.toml") << "[case]\nname = \"small-phantom\"\ninput = \"phantom\"\n\n"
                                           "[phantom]\nsize = 160\nslice_mm = 2.5\n\n"
-                                          "[[organ]]\nname = \"gallbladder\"\n\n[[organ]]\nname = \"trachea\"\n";
+                                          "[[organ]]\nname = \"gallbladder\"\n\n[[organ]]\nname = \"trachea\"\n\n"
+                                          // At 2.5 mm pixels the phantom's gallbladder is segmented
+                                          // on one slice (0.2 ml; issue 15) and its mesh misses the
+                                          // volume gate; these tests are about the haptic paths.
+                                          "[stages.mesh]\nquality_gate = \"report\"\n";
     setup_rc_ = run_cli("run " + q(dir_ / "small.toml") + " --out " + q(dir_ / "out") + " --until guide", &setup_log_);
   }
   static void TearDownTestSuite() { fs::remove_all(dir_); }
