@@ -12,6 +12,7 @@
 #include <CGAL/Mesh_triangulation_3.h>
 #include <CGAL/Polyhedral_mesh_domain_with_features_3.h>
 #include <CGAL/Surface_mesh.h>
+#include <CGAL/boost/graph/helpers.h>
 #include <CGAL/make_mesh_3.h>
 
 #include <stdexcept>
@@ -41,6 +42,12 @@ TetMesh mesh3_tets_polyhedral(const SurfaceMesh& closed, std::int32_t region, do
       throw MeshInputError("tetrahedral meshing: the surface is not a manifold triangle mesh",
       "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
 
+  // Feature detection walks every vertex's fan: a surface with a border (a wall that did not
+  // close) would send it off the mesh.
+  if (!CGAL::is_closed(mesh))
+    throw MeshInputError("tetrahedral meshing: the surface is not closed",
+                         "check the label map (a mask a few voxels thin cannot be closed), or try another edge length "
+                         "(--edge-mm, [stages.mesh] edge_mm)");
   CGAL::get_default_random() = CGAL::Random(0);
   Domain domain(mesh);
   domain.detect_features(feature_angle_deg);

@@ -441,16 +441,29 @@ SurfaceMesh tube_wall_from_surfaces(const SurfaceMesh& outer, const SurfaceMesh&
       h->info() = i;
       return handle[i] = h;
     };
-    std::size_t rim_edges = 0;
-    for (const auto& e : rims) {
-      if (on_plane(soup.vertices_lps_mm[e.first]) != int(pi) || on_plane(soup.vertices_lps_mm[e.second]) != int(pi)) continue;
-      cdt.insert_constraint(vh(e.first), vh(e.second));
-      ++rim_edges;
-    }
-    if (rim_edges == 0) continue;
+    // The rim edges on this plane, checked before any constraint is inserted: coincident rim
+    // vertices or crossing rim edges would break the constrained triangulation (it needs simple,
+    // disjoint rims), so they end the join here and the caller samples the wall on its own.
+    std::vector<std::pair<std::int32_t, std::int32_t>> here;
+    for (const auto& e : rims)
+      if (on_plane(soup.vertices_lps_mm[e.first]) == int(pi) && on_plane(soup.vertices_lps_mm[e.second]) == int(pi))
+        here.push_back(e);
+    if (here.empty()) continue;
+    for (const auto& e : here) vh(e.first), vh(e.second);
     if (cdt.number_of_vertices() != handle.size())
       throw MeshInputError("tube wall: rim vertices coincide in the cap plane",
       "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
+    auto p2 = [&](std::int32_t i) { return K::Point_2(soup.vertices_lps_mm[i][u], soup.vertices_lps_mm[i][w]); };
+    for (std::size_t a = 0; a < here.size(); ++a)
+      for (std::size_t b = a + 1; b < here.size(); ++b) {
+        const auto& ea = here[a];
+        const auto& eb = here[b];
+        if (ea.first == eb.first || ea.first == eb.second || ea.second == eb.first || ea.second == eb.second) continue;
+        if (CGAL::do_intersect(K::Segment_2(p2(ea.first), p2(ea.second)), K::Segment_2(p2(eb.first), p2(eb.second))))
+          throw MeshInputError("tube wall: rim edges cross in the cap plane",
+                               "check the label map, or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
+      }
+    for (const auto& e : here) cdt.insert_constraint(vh(e.first), vh(e.second));
     for (auto f = cdt.all_faces_begin(); f != cdt.all_faces_end(); ++f) f->info() = -1;
     std::vector<CDT::Face_handle> front{cdt.infinite_face()};
     cdt.infinite_face()->info() = 0;
