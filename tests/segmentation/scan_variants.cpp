@@ -166,6 +166,27 @@ Scan with_noise(const Scan& s, double sigma_hu, unsigned seed) {
   return out;
 }
 
+Eigen::Vector3d seed_at_centre(const LabelMap& ref) {
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  std::int64_t n = 0;
+  const auto& sz = ref.grid.size_vox;
+  for (std::int64_t k = 0; k < sz[2]; ++k)
+    for (std::int64_t j = 0; j < sz[1]; ++j)
+      for (std::int64_t i = 0; i < sz[0]; ++i)
+        if (ref.at(i, j, k)) c += Eigen::Vector3d(double(i), double(j), double(k)), ++n;
+  c /= double(n);
+  Eigen::Vector3d best = c;
+  double bd = 1e300;
+  for (std::int64_t k = 0; k < sz[2]; ++k)
+    for (std::int64_t j = 0; j < sz[1]; ++j)
+      for (std::int64_t i = 0; i < sz[0]; ++i)
+        if (ref.at(i, j, k)) {
+          const Eigen::Vector3d q{double(i), double(j), double(k)};
+          if ((q - c).norm() < bd) bd = (q - c).norm(), best = q;
+        }
+  return ref.grid.index_to_lps_mm(best);
+}
+
 Eigen::Vector3d seed_near_end(const Scan& s, int which, double depth_mm) {
   const ImageGrid& g = s.ref.grid;
   const auto& n = g.size_vox;

@@ -42,6 +42,9 @@ Scan tilted(const Scan& s, double degrees);
 /// Gaussian noise of `sigma_hu` added to every voxel (fixed random seed).
 Scan with_noise(const Scan& s, double sigma_hu, unsigned seed);
 
+/// The reference voxel nearest its centre of mass (LPS mm), as a user would click a seed.
+Eigen::Vector3d seed_at_centre(const LabelMap& ref);
+
 /// A voxel of the reference near its end along its longest axis (`which` = −1 or +1), at least
 /// `depth_mm` inside it where possible: a seed in the neck or the fundus.
 Eigen::Vector3d seed_near_end(const Scan& s, int which, double depth_mm);

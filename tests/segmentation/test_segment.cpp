@@ -5,6 +5,7 @@
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
 #include "pipeline/phantom.h"
+#include "scan_variants.h"
 #include "segmentation/segment.h"
 
 #include <gtest/gtest.h>
@@ -61,29 +62,6 @@ fs::path real(const std::string& rel) { return organsmith::testing::real_data_di
 Volume load(const fs::path& p) {
   NullProgress np;
   return ingest(p, IngestOptions{}, np).volume;
-}
-
-/// A voxel inside the reference, as a user would click it: the reference's centre of mass,
-/// moved to the nearest reference voxel of the middle slice.
-Eigen::Vector3d seed_inside(const LabelMap& ref) {
-  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  std::int64_t n = 0;
-  const auto& s = ref.grid.size_vox;
-  for (std::int64_t k = 0; k < s[2]; ++k)
-    for (std::int64_t j = 0; j < s[1]; ++j)
-      for (std::int64_t i = 0; i < s[0]; ++i)
-        if (ref.at(i, j, k)) sum += Eigen::Vector3d(double(i), double(j), double(k)), ++n;
-  const Eigen::Vector3d c = sum / double(n);
-  Eigen::Vector3d best = c;
-  double bd = 1e300;
-  for (std::int64_t k = 0; k < s[2]; ++k)
-    for (std::int64_t j = 0; j < s[1]; ++j)
-      for (std::int64_t i = 0; i < s[0]; ++i)
-        if (ref.at(i, j, k)) {
-          const double d = (Eigen::Vector3d(double(i), double(j), double(k)) - c).norm();
-          if (d < bd) bd = d, best = Eigen::Vector3d(double(i), double(j), double(k));
-        }
-  return ref.grid.index_to_lps_mm(best);
 }
 
 }  // namespace
@@ -183,7 +161,7 @@ TEST(SegmentReal, GallbladderFromOneSeedAndFromSeedsMoved3mm) {
   ORGANSMITH_REQUIRE_REAL_DATA();
   const Volume v = load(real("abdomen-ct-3mm/ct.nii.gz"));
   const LabelMap ref = read_label_map(real("abdomen-ct-3mm/gallbladder-reference.nii.gz"));
-  const Eigen::Vector3d seed = seed_inside(ref);
+  const Eigen::Vector3d seed = organsmith::testing::seed_at_centre(ref);
   std::vector<Eigen::Vector3d> seeds{seed};
   for (int axis = 0; axis < 3; ++axis)
     for (double d : {-3.0, 3.0}) {

@@ -185,34 +185,12 @@ Scan real_scan(const std::string& ct, const std::string& ref) {
   return s;
 }
 
-Eigen::Vector3d central_seed(const Scan& s) {
-  // The reference voxel nearest its centre of mass, as a user would click it.
-  Eigen::Vector3d c = Eigen::Vector3d::Zero();
-  std::int64_t n = 0;
-  const auto& sz = s.ref.grid.size_vox;
-  for (std::int64_t k = 0; k < sz[2]; ++k)
-    for (std::int64_t j = 0; j < sz[1]; ++j)
-      for (std::int64_t i = 0; i < sz[0]; ++i)
-        if (s.ref.at(i, j, k)) c += Eigen::Vector3d(double(i), double(j), double(k)), ++n;
-  c /= double(n);
-  Eigen::Vector3d best = c;
-  double bd = 1e300;
-  for (std::int64_t k = 0; k < sz[2]; ++k)
-    for (std::int64_t j = 0; j < sz[1]; ++j)
-      for (std::int64_t i = 0; i < sz[0]; ++i)
-        if (s.ref.at(i, j, k)) {
-          const Eigen::Vector3d q{double(i), double(j), double(k)};
-          if ((q - c).norm() < bd) bd = (q - c).norm(), best = q;
-        }
-  return s.ref.grid.index_to_lps_mm(best);
-}
-
 }  // namespace
 
 TEST(SegmentSweep, RealGallbladder) {
   ORGANSMITH_REQUIRE_REAL_DATA();
   Scan s = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/gallbladder-reference.nii.gz");
-  s.seed_lps_mm = central_seed(s);
+  s.seed_lps_mm = seed_at_centre(s.ref);
   sweep("abdomen-ct-3mm", s, "gallbladder", true, true, 0);
 }
 
@@ -309,7 +287,7 @@ TEST(MeshSweep, RealTracheaVariantsPassEveryGate) {
 TEST(MeshSweep, RealGallbladderVariantsPassEveryGate) {
   ORGANSMITH_REQUIRE_REAL_DATA();
   Scan base = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/gallbladder-reference.nii.gz");
-  base.seed_lps_mm = central_seed(base);
+  base.seed_lps_mm = seed_at_centre(base.ref);
   std::vector<std::pair<std::string, Scan>> v{{"unchanged", base},
                                               {"1.0 mm slices", resample_slices(base, 1.0)},
                                               {"5.0 mm slices", resample_slices(base, 5.0)},
