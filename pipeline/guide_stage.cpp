@@ -62,8 +62,9 @@ std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::p
   };
   fs::create_directories(dest_dir);
   std::vector<std::string> written;
-  auto emit = [&](const Polyline& line, const std::vector<std::pair<std::string, double>>& props) {
-    write_text_atomic(dest_dir / (line.name + ".json"), physics::path_json(line, props));
+  auto emit = [&](const Polyline& line, const std::vector<std::pair<std::string, double>>& props,
+                  const std::vector<std::pair<std::string, std::string>>& notes = {}) {
+    write_text_atomic(dest_dir / (line.name + ".json"), physics::path_json(line, props, notes));
     write_text_atomic(dest_dir / (line.name + ".vtp"), physics::path_vtp(line));
     written.push_back(line.name + ".json");
     written.push_back(line.name + ".vtp");
@@ -104,12 +105,30 @@ std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::p
       if (labels.count(dopt.liver_label) > 0) liver = &labels;
       else if (in.truth && in.truth->count(dopt.liver_label) > 0) liver = in.truth;
     }
-    const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, dopt);
-    spdlog::info("guide: gallbladder liver bed from the {}{}", d.bed_source,
-                 d.bed_source == "liver label" && liver != &labels ? " of the phantom ground truth" : "");
-    emit(d.line, {{"bed_area_mm2", d.bed_area_mm2},
-                  {"bed_from_liver_label", d.bed_source == "liver label" ? 1.0 : 0.0},
-                  {"max_surface_distance_mm", d.max_surface_distance_mm}});
+    const Volume* ct = nullptr;
+    if (!liver && dopt.bed_from_ct && in.ct) ct = in.ct();
+    const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, dopt, ct);
+    const std::string source =
+        d.bed_source + (d.bed_source == "liver label" && liver != &labels ? " of the phantom ground truth" : "");
+    spdlog::info("guide: gallbladder liver bed from the {}: {:.0f} % of its surface, rim {:.0f} mm", source,
+                 100.0 * d.covered_fraction, d.length_mm);
+    std::vector<std::pair<std::string, double>> props = {
+        {"bed_area_mm2", d.bed_area_mm2},
+        {"covered_fraction", d.covered_fraction},
+        {"bed_from_liver_label", d.bed_source == "liver label" ? 1.0 : 0.0},
+        {"bed_from_ct", d.bed_source == "CT intensity" ? 1.0 : 0.0},
+        {"max_surface_distance_mm", d.max_surface_distance_mm},
+        {"min_self_distance_mm", d.min_self_distance_mm},
+        {"rim_loops", double(d.rim_loops)},
+        {"spacing_mm", dopt.spacing_mm}};
+    if (!d.ct_estimate.reason.empty() || !d.ct_estimate.score.empty()) {
+      props.push_back({"ct_bile_hu", d.ct_estimate.bile_hu});
+      props.push_back({"ct_liver_hu", d.ct_estimate.liver_hu});
+      props.push_back({"ct_band_lo_hu", d.ct_estimate.band_lo_hu});
+      props.push_back({"ct_band_hi_hu", d.ct_estimate.band_hi_hu});
+      props.push_back({"ct_liver_region_ml", d.ct_estimate.liver_region_ml});
+    }
+    emit(d.line, props, {{"bed_source", source}});
   }
   return written;
 }

@@ -29,12 +29,15 @@ struct GuideStageOptions {
 const std::vector<std::string>& builtin_path_names();
 
 /// What the guide stage reads: the label map, the phantom's ground truth (for the liver bed when
-/// the label map has no liver; may be null) and the organ surfaces by (organ, surface name), in
-/// LPS mm. `surface` throws InputError when a surface is missing.
+/// the label map has no liver; may be null), the organ surfaces by (organ, surface name), in
+/// LPS mm, and the CT. `surface` throws InputError when a surface is missing.
 struct GuideInputs {
   const LabelMap* labels = nullptr;
   const LabelMap* truth = nullptr;
   std::function<SurfaceMesh(const std::string& organ, const std::string& surface)> surface;
+  /// The CT (HU), for the gallbladder's liver bed when no liver label touches it; called only
+  /// then; may be empty or return null (the bed then faces the usual liver direction).
+  std::function<const Volume*()> ct;
 };
 
 /// GuideInputs read from an output directory (for `guide` on a directory and for resuming): the

@@ -185,8 +185,10 @@ class Runner {
                  write_text_atomic(OutputLayout{staging}.materials(), materials_json().dump(2) + "\n");
                }});
       // guide: guidance paths (trachea centreline and incision, gallbladder dissection) in paths/.
+      // The CT (ingest) gives the gallbladder's liver bed where no liver label does.
       execute({"guide", fingerprint("guide", stage_json(case_, "guide").dump() + outputs_digest("phantom") +
-                                                 outputs_digest("segment") + outputs_digest("mesh")),
+                                                 outputs_digest("ingest") + outputs_digest("segment") +
+                                                 outputs_digest("mesh")),
                [&](const fs::path& staging) { write_paths(staging); }});
       // simulate: the organs' load cases in CalculiX (on request: minutes per organ).
       if (case_.stages.simulate.enabled || options_.from == "simulate" || options_.until == "simulate")
@@ -317,6 +319,7 @@ class Runner {
       files = read_guide_inputs(out_, case_.stages.mesh.ras);
       in = files->inputs();
     }
+    in.ct = [this]() -> const Volume* { return &volume(); };
     for (const auto& f : write_guidance_paths(in, OutputLayout{staging}.paths_dir(), case_.stages.guide, case_.registry))
       spdlog::info("guide: paths/{}", f);
   }

@@ -64,6 +64,8 @@ void visit(Visitor& v, GuideStageOptions& o) {
   v.number("ring_pitch_mm", o.incision.ring_pitch_mm, 1.0, 30.0, "mm", "incision: cartilage ring period");
   v.number("bed_distance_mm", o.dissection.bed_distance_mm, 0.1, 20.0, "mm",
            "dissection: surface within this distance of the liver is liver bed");
+  v.boolean("bed_from_ct", o.dissection.bed_from_ct,
+            "dissection without a liver label: find the liver bed in the CT (else: the surface facing up and right)");
   v.number("centerline_spacing_mm", o.centerline.spacing_mm, 0.1, 10.0, "mm", "centreline point spacing");
 }
 

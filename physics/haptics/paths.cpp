@@ -468,111 +468,6 @@ IncisionPath trachea_incision_path(const Centerline& cl, const SurfaceIndex& wal
   return out;
 }
 
-// ---- dissection ----------------------------------------------------------------------------------
-
-DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap* liver, const DissectionOptions& o) {
-  const auto& V = gb.vertices_lps_mm;
-  if (gb.triangles.empty()) throw InputError(ExitCode::mesh_input, "the gallbladder surface has no triangle", {});
-  std::vector<char> bed(V.size(), 0);
-  DissectionPath out;
-  bool by_label = false;
-  if (liver) {
-    const ImageGrid& g = liver->grid;
-    by_label = liver->count(o.liver_label) > 0;
-    if (by_label) {
-      out.bed_source = "liver label";
-      // Liver voxel centres lie up to about a voxel from the surface that touches them: on coarse
-      // grids the reach grows with the voxel diagonal.
-      const double reach_mm = std::max(o.bed_distance_mm, 0.75 * g.spacing_mm.norm());
-      const Eigen::Vector3d r = (Eigen::Vector3d::Constant(reach_mm).cwiseQuotient(g.spacing_mm)).array().ceil();
-      for (std::size_t i = 0; i < V.size(); ++i) {
-        const Eigen::Vector3d x = g.lps_mm_to_index(V[i]);
-        const Eigen::Vector3i c(int(std::lround(x.x())), int(std::lround(x.y())), int(std::lround(x.z())));
-        for (int k = c.z() - int(r.z()); k <= c.z() + int(r.z()) && !bed[i]; ++k)
-          for (int j = c.y() - int(r.y()); j <= c.y() + int(r.y()) && !bed[i]; ++j)
-            for (int ii = c.x() - int(r.x()); ii <= c.x() + int(r.x()); ++ii) {
-              if (!g.contains(ii, j, k) || liver->at(ii, j, k) != o.liver_label) continue;
-              if ((g.index_to_lps_mm(Eigen::Vector3d(ii, j, k)) - V[i]).norm() <= reach_mm) {
-                bed[i] = 1;
-                break;
-              }
-            }
-      }
-      if (std::find(bed.begin(), bed.end(), char(1)) == bed.end()) {
-        by_label = false;  // the liver label does not touch this surface: use the direction
-        out.bed_source = "surface facing the liver direction (the liver label does not touch the gallbladder)";
-      }
-    }
-  }
-  if (!by_label) {
-    if (out.bed_source.empty()) out.bed_source = "surface facing the liver direction";
-    std::vector<Eigen::Vector3d> vn(V.size(), Eigen::Vector3d::Zero());
-    for (const auto& t : gb.triangles) {
-      const Eigen::Vector3d n = (V[t[1]] - V[t[0]]).cross(V[t[2]] - V[t[0]]);
-      for (auto i : t) vn[std::size_t(i)] += n;
-    }
-    const Eigen::Vector3d dir = o.bed_direction_lps.normalized();
-    const double c = std::cos(o.bed_angle_deg * std::numbers::pi / 180.0);
-    for (std::size_t i = 0; i < V.size(); ++i) bed[i] = vn[i].norm() > 0 && vn[i].normalized().dot(dir) >= c;
-  }
-  // Bed triangles and their boundary edges (oriented as in the triangles).
-  std::map<std::pair<std::int32_t, std::int32_t>, int> edges;
-  std::size_t bed_tris = 0;
-  for (const auto& t : gb.triangles) {
-    if (!(bed[std::size_t(t[0])] && bed[std::size_t(t[1])] && bed[std::size_t(t[2])])) continue;
-    ++bed_tris;
-    out.bed_area_mm2 += 0.5 * (V[t[1]] - V[t[0]]).cross(V[t[2]] - V[t[0]]).norm();
-    for (int k = 0; k < 3; ++k) ++edges[{t[std::size_t(k)], t[std::size_t((k + 1) % 3)]}];
-  }
-  std::multimap<std::int32_t, std::int32_t> next;
-  for (const auto& [e, c] : edges)
-    if (!edges.count({e.second, e.first})) next.insert({e.first, e.second});
-  if (bed_tris == 0 || next.empty())
-    throw InputError(ExitCode::mesh_input,
-                     bed_tris == 0 ? "no part of the gallbladder surface lies in the liver bed (" + out.bed_source + ")"
-                                   : "the liver bed covers the whole gallbladder surface: no rim to dissect along",
-                     {}, "check the liver label or the bed direction and distance");
-  std::vector<std::vector<std::int32_t>> loops;
-  while (!next.empty()) {
-    std::vector<std::int32_t> loop;
-    const std::int32_t start = next.begin()->first;
-    std::int32_t v = start;
-    while (true) {
-      auto it = next.find(v);
-      if (it == next.end()) break;
-      loop.push_back(v);
-      v = it->second;
-      next.erase(it);
-      if (v == start) break;
-    }
-    if (loop.size() >= 3) loops.push_back(std::move(loop));
-  }
-  if (loops.empty()) throw InputError(ExitCode::mesh_input, "the liver bed has no closed rim on the gallbladder surface", {});
-  auto loop_length = [&](const std::vector<std::int32_t>& l) {
-    double s = 0;
-    for (std::size_t i = 0; i < l.size(); ++i) s += (V[std::size_t(l[(i + 1) % l.size()])] - V[std::size_t(l[i])]).norm();
-    return s;
-  };
-  const auto& longest = *std::max_element(loops.begin(), loops.end(),
-                                          [&](const auto& a, const auto& b) { return loop_length(a) < loop_length(b); });
-  Polyline rim;
-  rim.name = "gallbladder_dissection";
-  rim.closed = true;
-  for (auto i : longest) rim.points_lps_mm.push_back(V[std::size_t(i)]);
-  rim = smooth_polyline(resample_polyline(rim, 0.25), o.smoothing_mm);
-  rim = resample_polyline(rim, o.spacing_mm);
-  const SurfaceIndex index({gb});
-  for (auto& q : rim.points_lps_mm) q = index.closest(q).point_lps_mm;
-  const auto& l = rim.points_lps_mm;
-  for (std::size_t i = 0; i < l.size(); ++i) {
-    out.max_surface_distance_mm = std::max(out.max_surface_distance_mm, std::abs(index.closest(l[i]).signed_distance_mm));
-    out.max_surface_distance_mm = std::max(
-        out.max_surface_distance_mm, std::abs(index.closest(0.5 * (l[i] + l[(i + 1) % l.size()])).signed_distance_mm));
-  }
-  out.line = std::move(rim);
-  return out;
-}
-
 // ---- files ---------------------------------------------------------------------------------------
 
 Polyline read_path_file(const fs::path& path) {
@@ -685,7 +580,8 @@ void check_path_within(const Polyline& path, const ImageGrid& g, const fs::path&
   }
 }
 
-std::string path_json(const Polyline& path, const std::vector<std::pair<std::string, double>>& properties) {
+std::string path_json(const Polyline& path, const std::vector<std::pair<std::string, double>>& properties,
+                      const std::vector<std::pair<std::string, std::string>>& notes) {
   const auto& p = path.points_lps_mm;
   std::vector<double> s = path.arc_length_mm();
   std::string j = "{\n  \"name\": " + nlohmann::json(path.name).dump() + ",\n  \"coordinates\": \"LPS mm\",\n";
@@ -694,7 +590,14 @@ std::string path_json(const Polyline& path, const std::vector<std::pair<std::str
   j += "  \"properties\": {";
   for (std::size_t i = 0; i < properties.size(); ++i)
     j += (i ? ", " : "") + nlohmann::json(properties[i].first).dump() + ": " + fmt(properties[i].second, "%.6g");
-  j += "},\n  \"points_lps_mm\": [";
+  j += "},\n";
+  if (!notes.empty()) {
+    j += "  \"notes\": {";
+    for (std::size_t i = 0; i < notes.size(); ++i)
+      j += (i ? ", " : "") + nlohmann::json(notes[i].first).dump() + ": " + nlohmann::json(notes[i].second).dump();
+    j += "},\n";
+  }
+  j += "  \"points_lps_mm\": [";
   for (std::size_t i = 0; i < p.size(); ++i)
     j += std::string(i ? ",\n    " : "\n    ") + "[" + fmt(p[i].x()) + ", " + fmt(p[i].y()) + ", " + fmt(p[i].z()) + "]";
   j += "\n  ],\n  \"arc_length_mm\": [";

@@ -8,6 +8,7 @@
 #include "core/geometry.h"
 #include "core/grid.h"
 #include "core/volume.h"
+#include "physics/haptics/dissection.h"
 
 #include <Eigen/Core>
 
@@ -85,34 +86,7 @@ struct IncisionPath {
 IncisionPath trachea_incision_path(const Centerline& centerline, const SurfaceIndex& wall,
                                    const IncisionOptions& options = {});
 
-// ---- gallbladder dissection path -----------------------------------------------------------------
-
-struct DissectionOptions {
-  std::uint8_t liver_label = 3;   ///< label of the liver in the label map given
-  double bed_distance_mm = 2.0;   ///< a surface point touching liver voxels within this distance is in the bed (default 2)
-  /// Without a liver label: the bed is the part of the surface whose normal is within
-  /// `bed_angle_deg` of this direction (the liver lies superior and to the right of the
-  /// gallbladder: LPS (−0.3, 0, 1)).
-  Eigen::Vector3d bed_direction_lps{-0.3, 0.0, 1.0};
-  double bed_angle_deg = 60.0;
-  double smoothing_mm = 2.0;      ///< σ of the smoothing of the rim, mm (default 2)
-  double spacing_mm = 1.0;        ///< point spacing, mm (default 1)
-};
-
-struct DissectionPath {
-  Polyline line;                  ///< closed: the rim of the liver bed on the gallbladder surface
-  std::string bed_source;         ///< "liver label", or "surface facing the liver direction" (with the reason when a liver label was given but does not touch the surface)
-  double bed_area_mm2 = 0.0;      ///< area of the gallbladder surface in the bed
-  double max_surface_distance_mm = 0.0;
-};
-
-/// The curve where the gallbladder wall meets the liver bed: the longest boundary loop of the
-/// gallbladder surface triangles in the bed (liver voxels within bed_distance_mm when `liver` has
-/// the liver label, else the surface facing bed_direction_lps), smoothed, resampled and snapped
-/// back onto the surface. Throws InputError (exit code 60) when the bed is empty or covers the
-/// whole surface.
-DissectionPath gallbladder_dissection_path(const SurfaceMesh& gallbladder, const LabelMap* liver,
-                                           const DissectionOptions& options = {});
+// ---- gallbladder dissection path: physics/haptics/dissection.h ----------------------------------
 
 // ---- user paths and files ------------------------------------------------------------------------
 
@@ -128,8 +102,9 @@ void check_path_within(const Polyline& path, const ImageGrid& grid, const std::f
                        double tolerance_mm = 5.0);
 
 /// JSON text of a path: name, coordinates, closed, length_mm, point_count, `properties` (numbers),
-/// points_lps_mm and arc_length_mm (per point).
-std::string path_json(const Polyline& path, const std::vector<std::pair<std::string, double>>& properties = {});
+/// `notes` (texts; only when given), points_lps_mm and arc_length_mm (per point).
+std::string path_json(const Polyline& path, const std::vector<std::pair<std::string, double>>& properties = {},
+                      const std::vector<std::pair<std::string, std::string>>& notes = {});
 /// VTK XML PolyData text: one line cell (closed paths repeat the first point id), point data
 /// arc_length_mm.
 std::string path_vtp(const Polyline& path);

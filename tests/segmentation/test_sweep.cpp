@@ -12,6 +12,8 @@
 #include "pipeline/phantom.h"
 #include "scan_variants.h"
 #include "meshing/mesh.h"
+#include "physics/haptics/contact.h"
+#include "physics/haptics/paths.h"
 #include "segmentation/segment.h"
 
 #include <gtest/gtest.h>
@@ -230,8 +232,9 @@ TEST(SegmentSweep, IngestReordersASagittalSeriesToAxialSlices) {
 namespace {
 
 struct MeshRow {
-  std::string failures;  ///< empty = every gate passed
+  std::string failures;  ///< empty = every gate passed and every path is valid
   std::string remedies;
+  std::string paths;     ///< the paths' figures
   double seconds = 0;
 };
 
@@ -257,12 +260,35 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
       for (const auto& w : o.warnings)
         if (w.find("remed") != std::string::npos) row.remedies += w + "; ";
     }
+    // The organ's guidance paths, as the guide stage makes them (no liver label: the bed from the CT).
+    for (const auto& o : m.organs) {
+      char buf[256];
+      if (o.spec.name == "gallbladder") {
+        const physics::DissectionPath d = physics::gallbladder_dissection_path(o.surfaces.at(0).mesh, nullptr, {}, &s.ct);
+        std::snprintf(buf, sizeof buf, "dissection %s %.0f mm, covers %.2f, off-surface %.2f mm, self %.1f mm",
+                      d.bed_source.substr(0, 12).c_str(), d.length_mm, d.covered_fraction, d.max_surface_distance_mm,
+                      d.min_self_distance_mm);
+        row.paths += buf;
+        if (d.bed_source != "CT intensity") row.failures += "dissection bed not found in the CT: " + d.bed_source + "; ";
+        if (d.max_surface_distance_mm > 1.0) row.failures += "dissection path off the surface; ";
+        if (!(d.min_self_distance_mm > 0.0)) row.failures += "dissection path crosses itself; ";
+      } else if (o.spec.name == "trachea") {
+        const physics::Centerline cl = physics::trachea_centerline(seg.labels);
+        const physics::SurfaceIndex wall({o.surfaces.at(0).mesh});
+        const physics::IncisionPath inc = physics::trachea_incision_path(cl, wall);
+        std::snprintf(buf, sizeof buf, "centreline %.0f mm, incision %.0f mm, off-wall %.2f mm", cl.line.length_mm(),
+                      inc.length_mm, inc.max_wall_distance_mm);
+        row.paths += buf;
+        if (inc.max_wall_distance_mm > 1.0) row.failures += "incision path off the wall; ";
+      }
+    }
   } catch (const std::exception& e) {
     row.failures = std::string("error: ") + e.what();
   }
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf("| %-12s | %-22s | %s | %5.1f s | %s\n", organ.c_str(), name.c_str(),
-              row.failures.empty() ? "all gates pass" : row.failures.c_str(), row.seconds, row.remedies.c_str());
+  std::printf("| %-12s | %-22s | %s | %5.1f s | %s | %s\n", organ.c_str(), name.c_str(),
+              row.failures.empty() ? "all gates pass, paths valid" : row.failures.c_str(), row.seconds,
+              row.paths.c_str(), row.remedies.c_str());
   std::fflush(stdout);
   return row;
 }
