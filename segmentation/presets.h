@@ -38,6 +38,17 @@ struct OrganPreset {
   double edge_stop = 0;                       ///< edge-map value (0–1) at which the outward pressure halves; 0 = off
   double min_area_mm2 = 15, max_area_mm2 = 2600;  ///< per-slice lumen/organ area limits, mm²
   double max_area_ratio = 1.8;                ///< largest area ratio between neighbouring slices
+  /// A section larger than shift_growth_ratio × the previous one with more than
+  /// max_shifted_fraction of its area farther than shift_tolerance_mm outside the previous
+  /// contour ends the organ (a neighbour joined in). max_shifted_fraction = 1 turns this off.
+  /// A seed whose section is too small to fit starts from the nearest slice within this distance
+  /// (mm) where the organ fits (0 = only the seed's slice).
+  double seed_slide_mm = 0.0;
+  /// Airway: a second air component under the lumen this far back (mm) also marks the carina.
+  double divide_span_mm = 0.0;
+  double shift_growth_ratio = 1.25;
+  double max_shifted_fraction = 1.0;
+  double shift_tolerance_mm = 3.0;
   double area_ratio_span_mm = 3;              ///< …and between slices this far apart, mm (thin slices)
   double max_mean_drift_hu = 25;              ///< propagation stops beyond this drift of the mean
   double min_fill = 0.55, max_aspect = 2.2;   ///< roundness tests of airway candidates

@@ -19,6 +19,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <map>
 #include <numeric>
 
@@ -28,6 +29,35 @@ using seg::Image2f;
 using seg::Point2;
 
 namespace {
+
+/// Fraction of the area inside contour `a` that lies farther than `tol_mm` outside contour `b`
+/// (both in slice mm): how much of a new section is not a continuation of the previous one.
+double area_outside(const std::vector<Point2>& a, const std::vector<Point2>& b, double tol_mm, double sx, double sy) {
+  if (a.size() < 3 || b.size() < 3) return 0.0;
+  double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
+  for (const auto* c : {&a, &b})
+    for (const auto& p : *c) x0 = std::min(x0, p.x), y0 = std::min(y0, p.y), x1 = std::max(x1, p.x), y1 = std::max(y1, p.y);
+  const int pad = int(std::ceil(tol_mm / std::min(sx, sy))) + 2;
+  const int w = int(std::ceil((x1 - x0) / sx)) + 2 * pad + 1, h = int(std::ceil((y1 - y0) / sy)) + 2 * pad + 1;
+  auto to_px = [&](const std::vector<Point2>& c) {
+    std::vector<Point2> q;
+    for (const auto& p : c) q.push_back({(p.x - x0) / sx + pad, (p.y - y0) / sy + pad});
+    return q;
+  };
+  cv::Mat ma = cv::Mat::zeros(h, w, CV_8U), mb = cv::Mat::zeros(h, w, CV_8U);
+  rasterise(to_px(a), w, h, [&](int x, int y) { ma.at<std::uint8_t>(y, x) = 255; });
+  rasterise(to_px(b), w, h, [&](int x, int y) { mb.at<std::uint8_t>(y, x) = 255; });
+  if (tol_mm > 0) {
+    const int rx = std::max(1, int(std::lround(tol_mm / sx))), ry = std::max(1, int(std::lround(tol_mm / sy)));
+    cv::dilate(mb, mb, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * rx + 1, 2 * ry + 1}));
+  }
+  const int n = cv::countNonZero(ma);
+  if (n == 0) return 0.0;
+  cv::Mat out;
+  cv::bitwise_and(ma, ~mb, out);
+  return double(cv::countNonZero(out)) / n;
+}
+
 
 std::string fmt_mm(const Eigen::Vector3d& p) {
   char b[96];
@@ -319,7 +349,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
                             "give --seed X,Y,Z (LPS mm) or --seed-ijk I,J,K inside the " + p.organ);
   }
   out.seed_lps_mm = seed_lps;
-  const std::int64_t k0 = std::llround(ijk.z());
+  std::int64_t k0 = std::llround(ijk.z());  // the start slice (moved off a section too small to fit, below)
   if (!g.contains(std::llround(ijk.x()), std::llround(ijk.y()), k0))
     throw SegmentationError(ExitCode::bad_seed,
                             p.organ + " seed " + fmt_mm(seed_lps) + " lies outside the image",
@@ -416,11 +446,12 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         // sideways, as a fundus does between thick slices), start from its shrunken outline.
         const cv::Mat under = seg::region_under(region, k, prev, c.sx, c.sy, p.region_reach_mm);
         double a_under = 0;
+        bool from_region = false;
         if (!under.empty()) {
           a_under = cv::countNonZero(under) * c.sx * c.sy;
           const std::vector<Point2> outline = seg::mask_outline_mm(region, under, c.sx, c.sy);
           if (a_under >= p.min_area_mm2 && a_under <= p.max_area_ratio * prev_area && outline.size() >= 4)
-            init = scaled(outline, 0.7);
+            init = scaled(outline, 0.7), from_region = true;
         }
         const double m_init = median_inside(c, k, init);
         if (!(m_init >= lo && m_init <= hi)) {
@@ -428,6 +459,15 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
           return;
         }
         Fit f = fit_slice(c, k, init, p, lo, hi, p.roi_margin_mm, open_for(prev_area));
+        if (from_region &&
+            area_outside(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction) {
+          // Started from the region's outline the snake slid onto another structure: start again
+          // inside the previous section.
+          Fit again = fit_slice(c, k, scaled(prev, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area));
+          if (again.area_mm2 >= p.min_area_mm2 &&
+              area_outside(again.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) <= p.max_shifted_fraction)
+            f = std::move(again);
+        }
         if (f.area_mm2 < p.min_area_mm2) {
           note = "stopped at slice " + std::to_string(k) + ": area collapsed";
           return;
@@ -436,6 +476,13 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         if (f.area_mm2 > p.max_area_mm2 || f.area_mm2 > p.max_area_ratio * prev_area ||
             f.area_mm2 > p.max_area_ratio * base_area) {
           note = "stopped at slice " + std::to_string(k) + ": area jumped (leak into a neighbour)";
+          return;
+        }
+        // A section that grows while much of it lies off the previous one is a neighbour joined
+        // in (a bowel loop beside a tapering fundus between thick slices), not the organ going on.
+        if (f.area_mm2 > p.shift_growth_ratio * prev_area &&
+            area_outside(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction) {
+          note = "stopped at slice " + std::to_string(k) + ": the section grew off the previous one (leak into a neighbour)";
           return;
         }
         // A wall that is not visible all round (bile against liver of close HU on a noisy scan)
@@ -474,7 +521,36 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     at.mu = mu;
     return at;
   };
-  Attempt at = attempt(seed_med, true);
+  // A seed in a section too small to fit (a neck or a fundus tip a few pixels across, blurred
+  // with the liver around it) starts from the nearest slice within seed_slide_mm where the
+  // section at the seed's position fits; propagation then comes back through the seed's slice.
+  Attempt at;
+  const std::int64_t k_seed = k0;
+  const int slide = int(std::floor(p.seed_slide_mm / g.spacing_mm.z() + 1e-9));
+  for (int d = 0;; ++d) {
+    bool fitted = false;
+    for (int sign : {-1, 1}) {
+      if (d == 0 && sign > 0) continue;
+      k0 = k_seed + sign * d;
+      if (k0 < 0 || k0 >= K) continue;
+      const double m = d == 0 ? seed_med : median_inside(c, k0, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24));
+      if (!(m >= p.seed_hu_lo && m <= p.seed_hu_hi)) continue;
+      try {
+        at = attempt(m, true);
+        fitted = true;
+        break;
+      } catch (const SegmentationError& e) {
+        if (e.code() != ExitCode::organ_not_found || d >= slide) throw;
+      }
+    }
+    if (fitted) break;
+    if (d >= slide) {
+      k0 = k_seed;
+      at = attempt(seed_med, true);  // reports why the seed's own slice fails
+      break;
+    }
+  }
+
   // The organ's median over every slice found is a steadier centre for the window than one
   // slice around the seed (seeds a slice apart gave windows 6 HU apart on a real scan); a
   // second pass with it makes the result depend less on where the seed was placed.
@@ -490,7 +566,15 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
       const double m3 = *mid;
       if (m3 >= p.seed_hu_lo && m3 <= p.seed_hu_hi && std::abs(m3 - at.mu) > 1.5) {
         try {
-          at = attempt(m3, false);
+          Attempt second = attempt(m3, false);
+          // A window a few HU away changes the outline a little; a second pass that loses most of
+          // the organ (its seed section fitted worse on a noisy slice) is not the steadier one.
+          auto volume = [](const Attempt& a) {
+            double v = 0;
+            for (const auto& sc : a.all) v += std::abs(polygon_area(sc.pts));
+            return v;
+          };
+          if (volume(second) >= 0.5 * volume(at)) at = std::move(second);
         } catch (const SegmentationError&) {
           // keep the first pass
         }
@@ -509,6 +593,9 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   std::snprintf(win, sizeof win, "organ window %.0f to %.0f HU (median %.0f HU); noise %.0f HU, region smoothing %.2f px",
                 lo, hi, mu, noise_hu, std::max(p.region_sigma_mm / std::min(c.sx, c.sy), p.region_sigma_px));
   out.notes = {"towards k = 0: " + note_down, "towards k = " + std::to_string(K - 1) + ": " + note_up, win};
+  if (k0 != k_seed)
+    out.notes.push_back("started at slice " + std::to_string(k0) + ", " + std::to_string(std::llabs(k0 - k_seed)) +
+                        " from the seed's: the section at the seed was too small to fit");
   return out;
 }
 
@@ -689,13 +776,19 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
     if (oi == start) {
       comp = start_comp;
     } else {
-      // Air components overlapping the previous lumen.
+      // Air components overlapping the previous lumen, or the lumen divide_span_mm back: on
+      // thin slices the bronchi part gradually, and the second one may appear only once the
+      // contour above has already narrowed to the first.
       std::map<int, int> overlap;
-      const std::vector<Point2> px = to_px(c, prev_pts);
-      seg::rasterise(px, c.W, c.H, [&](int x, int y) {
-        const int l = a.labels.at<int>(y, x);
-        if (l) ++overlap[l];
-      });
+      const std::size_t back = std::size_t(std::max(1.0, std::floor(p.divide_span_mm / g.spacing_mm.z() + 1e-9)));
+      for (const auto* pts : {&prev_pts, &acc[acc.size() > back ? acc.size() - back : 0].pts}) {
+        std::map<int, int> here;
+        seg::rasterise(to_px(c, *pts), c.W, c.H, [&](int x, int y) {
+          const int l = a.labels.at<int>(y, x);
+          if (l) ++here[l];
+        });
+        for (const auto& [l, n] : here) overlap[l] = std::max(overlap[l], n);
+      }
       std::vector<Component> hits;
       for (const auto& [l, n] : overlap) {
         const Component& q = a.comps[std::size_t(l - 1)];

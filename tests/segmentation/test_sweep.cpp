@@ -95,16 +95,13 @@ struct Short {
   double reached;
 };
 const std::vector<Short> kShortOfTarget = {
-    {"abdomen-ct-3mm", "gallbladder", "0.7 mm slices", 0.671},
-    {"abdomen-ct-3mm", "gallbladder", "5.0 mm slices", 0.769},
-    {"abdomen-ct-3mm", "gallbladder", "noise 20 HU", 0.440},
-    {"abdomen-ct-3mm", "gallbladder", "seed +5 mm S", 0.693},
-    {"chest-dicom-8mm", "trachea", "0.7 mm slices", 0.876},
+    {"abdomen-ct-3mm", "gallbladder", "noise 20 HU", 0.636},
+    {"abdomen-ct-3mm", "gallbladder", "seed +5 mm S", 0.831},
+    {"chest-dicom-8mm", "trachea", "0.7 mm slices", 0.937},
     {"chest-dicom-8mm", "trachea", "1.0 mm slices", 0.935},
     {"chest-dicom-8mm", "trachea", "2.0 mm slices", 0.939},
     {"chest-dicom-8mm", "trachea", "3.0 mm slices", 0.940},
     {"chest-dicom-8mm", "trachea", "5.0 mm slices", 0.902},
-    {"phantom 256x256x160", "gallbladder", "seed at other end", 0.0},
 };
 
 void sweep(const std::string& case_name, const Scan& base, const std::string& organ, bool seeded, bool thin_slices,
@@ -324,4 +321,28 @@ TEST(MeshSweep, RealGallbladderVariantsPassEveryGate) {
     const MeshRow r = mesh_variant(name, s, "gallbladder", true);
     EXPECT_TRUE(r.failures.empty()) << name << ": " << r.failures;
   }
+}
+
+// The trachea's resampled variants are all interpolated from 8 mm slices: between two slices the
+// reference (box-averaged labels ≥ 0.5, the union at the mid-slices) and the interpolated CT
+// disagree by construction. A perfect segmentation (air exactly where the reference is, tissue
+// elsewhere) resampled the same way and cut at the airway's −500 HU gives the best Dice any
+// method can reach on these variants; the sweep's figures are compared with it in README.
+TEST(SegmentSweep, TracheaResampledVariantsBestReachableDice) {
+  ORGANSMITH_REQUIRE_REAL_DATA();
+  Scan oracle = real_scan("chest-dicom-8mm/dicom", "chest-dicom-8mm/trachea-reference.nii.gz");
+  for (std::size_t i = 0; i < oracle.ct.hu.size(); ++i) oracle.ct.hu[i] = oracle.ref.labels[i] ? -1000.0f : 40.0f;
+  double lowest = 1.0;
+  for (double t : {0.7, 1.0, 2.0, 3.0, 5.0}) {
+    const Scan s = resample_slices(oracle, t);
+    LabelMap m;
+    m.grid = s.ct.grid;
+    m.labels.assign(s.ct.hu.size(), 0);
+    for (std::size_t i = 0; i < s.ct.hu.size(); ++i) m.labels[i] = s.ct.hu[i] < -500.0f ? 1 : 0;
+    const double d = score_against(s.ref, m, 1).dice;
+    std::printf("| trachea | %.1f mm slices | best reachable Dice %.3f |\n", t, d);
+    lowest = std::min(lowest, d);
+    EXPECT_GT(d, 0.85);  // the construction itself is sound: a perfect answer scores high
+  }
+  std::printf("lowest best-reachable Dice over the resampled trachea variants: %.3f (target 0.97)\n", lowest);
 }
