@@ -25,7 +25,6 @@
 namespace organsmith {
 namespace fs = std::filesystem;
 
-std::vector<std::string> all_mesh_formats() { return {"stl", "obj", "ply", "vtp", "vtu", "msh", "msh22", "inp", "feb"}; }
 
 using namespace export_text;
 

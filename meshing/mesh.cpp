@@ -686,8 +686,12 @@ OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Prog
       for (const auto& f : organ.volume_quality.failures) failures += "\n  " + organ.spec.name + " tetrahedra: " + f;
     }
     if (!failures.empty())
-      throw MeshQualityError("the meshes fail their quality guarantees:" + failures,
-                             "try a smaller --edge-mm, or pass --allow-quality-failures to write them anyway");
+      throw MeshQualityError(
+          "the meshes fail their quality guarantees" +
+              std::string(options.quality_remedies > 0 ? " (also after meshing's remedies: smoother, finer, both)" : "") +
+              ":" + failures,
+          "try another edge length (--edge-mm, or [stages.mesh] edge_mm), or pass --allow-quality-failures (in a case: "
+          "[stages.mesh] quality_gate = \"report\") to write them anyway with the failures in quality.json");
   }
   return result;
 }

@@ -9,6 +9,7 @@
 #include "core/errors.h"
 #include "core/memory.h"
 #include "pipeline/dicom.h"
+#include "pipeline/dicom_structure.h"
 
 #include <gdcmAttribute.h>
 #include <gdcmImage.h>
@@ -108,75 +109,17 @@ int us_value(const gdcm::DataSet& ds) {
   return int(at.GetValue());
 }
 
-std::uint32_t le32(const unsigned char* p) { return p[0] | (p[1] << 8) | (p[2] << 16) | (std::uint32_t(p[3]) << 24); }
-std::uint16_t le16(const unsigned char* p) { return std::uint16_t(p[0] | (p[1] << 8)); }
 
-/// Walks the data elements of a Part-10 file up to and including the pixel data and checks that
-/// every declared length fits in the file. GDCM aborts on some truncated files (an assertion
-/// in its compatibility reader), so truncation must be caught before GDCM sees the file.
-/// Sequences and encapsulated pixel data with undefined length end the walk (GDCM then checks).
+/// Checks the byte structure of a Part-10 file up to and including the pixel data
+/// (pipeline/dicom_structure.h): GDCM aborts on some truncated files, so truncation must be
+/// caught before GDCM sees the file.
 bool structurally_complete(const fs::path& path, std::string& why, PixelLocation& pixels) {
-  std::error_code ec;
-  const std::uint64_t n = fs::file_size(path, ec);
-  std::ifstream in(path, std::ios::binary);
-  unsigned char h[12];
-  auto read_at = [&](std::uint64_t pos, std::size_t bytes) {
-    if (pos + bytes > n) return false;
-    in.seekg(std::streamoff(pos));
-    in.read(reinterpret_cast<char*>(h), std::streamsize(bytes));
-    return bool(in);
-  };
-  if (ec || !read_at(128, 4) || std::memcmp(h, "DICM", 4) != 0) {
-    why = "has no DICOM preamble";
+  const DicomStructure st = check_dicom_structure(path);
+  if (!st.complete) {
+    why = st.why;
     return false;
   }
-  auto long_form = [](const unsigned char* vr) {
-    static const char* kinds[] = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ", "SV", "UC", "UN", "UR", "UT", "UV"};
-    for (const char* k : kinds)
-      if (vr[0] == k[0] && vr[1] == k[1]) return true;
-    return false;
-  };
-  std::uint64_t pos = 132;
-  bool explicit_vr = true, in_meta = true;
-  while (pos < n) {
-    if (!read_at(pos, std::min<std::uint64_t>(12, n - pos)) || pos + 8 > n) break;
-    const std::uint16_t group = le16(h), element = le16(h + 2);
-    if (in_meta && group != 0x0002) {
-      in_meta = false;
-      explicit_vr = std::isupper(h[4]) && std::isupper(h[5]);  // implicit VR has a length here
-    }
-    std::uint64_t length;
-    std::uint64_t header = 8;
-    if (explicit_vr || in_meta) {
-      if (long_form(h + 4)) {
-        if (pos + 12 > n) break;
-        length = le32(h + 8);
-        header = 12;
-      } else {
-        length = le16(h + 6);
-      }
-    } else {
-      length = le32(h + 4);
-    }
-    if (length == 0xffffffffu) return true;  // undefined length (sequence, encapsulated pixels): GDCM checks the rest
-    if (pos + header + length > n) {
-      std::ostringstream m;
-      m << "is truncated: element (" << std::hex << std::setfill('0') << std::setw(4) << group << ","
-        << std::setw(4) << element << std::dec << ") needs " << length << " bytes but only "
-        << (n - pos - header) << " remain";
-      why = m.str();
-      return false;
-    }
-    if (group == 0x7fe0 && element == 0x0010) {
-      pixels = {pos + header, length};
-      return true;
-    }
-    pos += header + length;
-  }
-  if (pos != n) {
-    why = "is truncated inside an element header";
-    return false;
-  }
+  if (st.has_pixel_data && !st.encapsulated) pixels = {st.pixel_offset, st.pixel_bytes};
   return true;
 }
 

@@ -16,11 +16,6 @@ namespace organsmith {
 
 namespace fs = std::filesystem;
 
-const std::vector<std::string>& builtin_path_names() {
-  static const std::vector<std::string> names = {"trachea_centerline", "trachea_incision", "gallbladder_dissection"};
-  return names;
-}
-
 GuideFiles read_guide_inputs(const fs::path& out_dir, bool ras) {
   const OutputLayout layout{out_dir};
   GuideFiles f;

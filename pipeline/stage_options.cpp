@@ -12,6 +12,12 @@
 
 namespace organsmith {
 
+const std::vector<std::string>& builtin_path_names() {
+  static const std::vector<std::string> names = {"trachea_centerline", "trachea_incision", "gallbladder_dissection"};
+  return names;
+}
+
+
 namespace fs = std::filesystem;
 
 MeshStageOptions::MeshStageOptions() : formats(all_mesh_formats()) {}

@@ -90,6 +90,15 @@ TEST(CaseFile, MistakesAreRejectedNotDefaulted) {
   EXPECT_EQ(parse_code("[[organ]]\nname = \"trachea\"\n[[organ]]\nname = \"trachea\"\n"), ExitCode::case_file);
   EXPECT_EQ(parse_code("[case\n"), ExitCode::case_file);                                       // syntax
   EXPECT_EQ(parse_code("[ingest]\nmax_memory_mb = -1\n"), ExitCode::case_file);
+  // Non-ASCII text is TOML only inside strings and comments; elsewhere it is refused before
+  // toml++ sees it (U+FCFF before a table header reached an unreachable point in toml++; found by
+  // fuzz/fuzz_case_file.cpp).
+  EXPECT_EQ(parse_code("\xef\xb3\xbf[case]\ninput = \"phantom\"\n"), ExitCode::case_file);
+  EXPECT_EQ(parse_code("[case]\ninput = \"phantom\" \xc2\xa0\n"), ExitCode::case_file);
+  EXPECT_EQ(parse_code("# Gallenblase — \xcf\x83 \xe2\x89\x88 1 mm\n[case]\nname = \"P\xc3\xa4ttient \\\" \xe2\x80\x94\"\n"
+                       "input = \"phantom\"  # \xc3\xbc\n"),
+            ExitCode::ok);
+  EXPECT_EQ(parse_code("[case]\nname = \"\"\"multi \xc3\xa4\n line\"\"\"\ninput = 'phantom'\n"), ExitCode::ok);
 }
 
 TEST(CaseFile, SegmentationPresetsOverrideTheEmbeddedOnesAndMisspeltKeysAreRejected) {
