@@ -16,11 +16,15 @@ namespace organsmith {
 
 /// Line and column (1-based) of the first non-ASCII byte outside a string or a comment, or
 /// {0, 0}. TOML 1.0 allows non-ASCII text only inside strings (quoted keys included) and
-/// comments; Debian's toml++ reaches an unreachable point on some such characters elsewhere
-/// (found by fuzz/fuzz_case_file.cpp: U+FCFF before a table header), so they are refused first.
+/// comments. Debian's toml++ 3.3 (a shared library) reaches an unreachable point when it asks
+/// whether such a character elsewhere is whitespace (U+00A1–U+0499 and U+FCA6–U+FEFE fall into
+/// an unhandled branch of its generated table; found by fuzz/fuzz_case_file.cpp), so they are
+/// refused first. A quote opens a string only where TOML allows one — at the start of a line or
+/// after `=`, `[`, `,`, `{` or `.` — as toml++ reads it: `x = 2c"ä"` is a bare value with ä in it.
 inline std::pair<int, int> toml_non_ascii_outside_strings(std::string_view t) {
   int line = 1, col = 0;
   std::size_t i = 0;
+  char prev = '\n';  // the last character outside strings and comments that was not a space or tab
   auto starts = [&](std::string_view s) { return t.substr(i, s.size()) == s; };
   auto advance = [&](std::size_t n) {
     for (std::size_t k = 0; k < n && i < t.size(); ++k, ++i) {
@@ -31,19 +35,23 @@ inline std::pair<int, int> toml_non_ascii_outside_strings(std::string_view t) {
   while (i < t.size()) {
     const unsigned char c = static_cast<unsigned char>(t[i]);
     if (c >= 0x80) return {line, col + 1};
+    const bool string_may_start = prev == '\n' || prev == '=' || prev == '[' || prev == ',' || prev == '{' || prev == '.';
     if (c == '#') {
       while (i < t.size() && t[i] != '\n') advance(1);
-    } else if (starts("\"\"\"") || starts("'''")) {
+    } else if (string_may_start && (starts("\"\"\"") || starts("'''"))) {
       const std::string_view close = t.substr(i, 3);
       const bool basic = close[0] == '"';
       advance(3);
       while (i < t.size() && !starts(close)) advance(basic && t[i] == '\\' ? 2 : 1);
       advance(3);
-    } else if (c == '"' || c == '\'') {
+      prev = '"';
+    } else if (string_may_start && (c == '"' || c == '\'')) {
       advance(1);
       while (i < t.size() && t[i] != static_cast<char>(c) && t[i] != '\n') advance(c == '"' && t[i] == '\\' ? 2 : 1);
-      advance(1);
+      if (i < t.size() && t[i] == static_cast<char>(c)) advance(1);
+      prev = '"';
     } else {
+      if (c != ' ' && c != '\t' && c != '\r') prev = static_cast<char>(c);
       advance(1);
     }
   }
