@@ -132,6 +132,12 @@ Prepared prepare(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOption
           p.b1 = {std::max(p.b1[0], i), std::max(p.b1[1], j), std::max(p.b1[2], k)};
         }
   if (count == 0) return p;  // caller reports absence
+  if (p.b0 == std::array<std::int64_t, 3>{0, 0, 0} && p.b1 == std::array<std::int64_t, 3>{N[0] - 1, N[1] - 1, N[2] - 1})
+    throw MeshInputError(spec.name + " (label " + std::to_string(int(spec.label)) +
+                             ") touches all six faces of the image: no part of it lies inside the field of view "
+                             "to give an organ surface",
+                         "check the label map: this looks like a mask of the whole scan or the body, not of the " +
+                             spec.name);
 
   // Sides cut flat: the tube's two ends, and any side where the label reaches the image border.
   for (int a = 0; a < 3; ++a) {

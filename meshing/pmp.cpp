@@ -317,11 +317,19 @@ SurfaceMesh repair_and_remesh(const SurfaceMesh& in, const RemeshParams& p, std:
   }
 
   clock.done("repair");
-  PMP::isotropic_remeshing(faces(m), p.target_edge_mm, m,
-                           CGAL::parameters::number_of_iterations(p.iterations)
-                               .edge_is_constrained_map(constrained)
-                               .protect_constraints(false)
-                               .relax_constraints(true));
+  try {
+    PMP::isotropic_remeshing(faces(m), p.target_edge_mm, m,
+                             CGAL::parameters::number_of_iterations(p.iterations)
+                                 .edge_is_constrained_map(constrained)
+                                 .protect_constraints(false)
+                                 .relax_constraints(true));
+  } catch (const std::out_of_range& e) {
+    // CGAL's remesher looks up a normal it never stored on some all-flat boxes (a label
+    // filling the image): an input it cannot mesh, not an internal error of ours.
+    throw MeshInputError(std::string("the surface could not be remeshed (CGAL: ") + e.what() + ")",
+                         "check the label map: a label that is only flat faces cut by the image border has no organ "
+                         "surface to mesh");
+  }
   m.collect_garbage();
   clock.done("isotropic remeshing");
 

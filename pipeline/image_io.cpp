@@ -92,10 +92,19 @@ LabelMap read_label_map(const fs::path& path) {
   m.labels.resize(values.size());
   for (std::size_t a = 0; a < values.size(); ++a) {
     const float v = std::nearbyint(values[a]);
-    if (v < 0.0f || v > 255.0f)
+    if (!(v >= 0.0f && v <= 255.0f))
       throw InputError(ExitCode::unsupported_input,
                        "label value " + std::to_string(values[a]) + " is outside 0–255", path,
                        "give a label map with small non-negative integer labels");
+    // A label is a class, not a measurement: fractional values (a probability map, a resampled
+    // label image) are refused rather than rounded into shapes nobody drew.
+    if (std::abs(values[a] - v) > 1e-3f)
+      throw InputError(ExitCode::unsupported_input,
+                       "label value " + std::to_string(values[a]) + " at voxel " + std::to_string(a) +
+                           " is not a whole number: this is not a label map",
+                       path,
+                       "give integer labels (a probability map must be thresholded first, and a label image "
+                       "resampled with nearest-neighbour interpolation)");
     m.labels[a] = std::uint8_t(v);
   }
   return m;

@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <fstream>
 #include <map>
 #include <set>
@@ -125,13 +126,28 @@ TEST(RunOptions, MeshingInputProblemsExitWith60AndWriteNothing) {
   organsmith::LabelMap speck = empty;  // one voxel of the gallbladder: too small for a surface
   speck.labels[speck.grid.offset(16, 16, 4)] = 1;
   organsmith::write_label_map(speck, tmp / "speck.nii.gz");
+  organsmith::LabelMap fill = empty;  // the whole image: no organ surface inside the field of view
+  std::fill(fill.labels.begin(), fill.labels.end(), std::uint8_t(1));
+  organsmith::write_label_map(fill, tmp / "fill.nii.gz");
   std::string log;
-  for (const char* f : {"empty.nii.gz", "speck.nii.gz"}) {
+  for (const char* f : {"empty.nii.gz", "speck.nii.gz", "fill.nii.gz"}) {
     EXPECT_EQ(run_cli("mesh " + quoted(tmp / f) + " --out " + quoted(tmp / "out"), &log), int(organsmith::ExitCode::mesh_input))
         << f << "\n" << log;
     EXPECT_EQ(log.find("internal error"), std::string::npos) << log;
     EXPECT_FALSE(fs::exists(tmp / "out")) << f;
   }
+  EXPECT_NE(log.find("touches all six faces"), std::string::npos) << log;
+  // Fractional labels (a probability map) are no label map: refused as read (18), in seconds.
+  organsmith::Volume prob;
+  prob.grid = empty.grid;
+  prob.hu.resize(std::size_t(prob.grid.voxel_count()));
+  for (std::size_t i = 0; i < prob.hu.size(); ++i) prob.hu[i] = float(i % 7) * 0.25f;
+  organsmith::write_volume_file(prob, tmp / "probability.nii.gz");
+  EXPECT_EQ(run_cli("mesh " + quoted(tmp / "probability.nii.gz") + " --out " + quoted(tmp / "out"), &log),
+            int(organsmith::ExitCode::unsupported_input))
+      << log;
+  EXPECT_NE(log.find("is not a whole number"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(tmp / "out"));
 }
 
 // A mesh that fails a gate after meshing's remedies stops `run` with exit 61 naming the organ
