@@ -3,6 +3,7 @@
 #include "core/errors.h"
 #include "pipeline/itk_image_io.h"
 #include "pipeline/nifti_check.h"
+#include "pipeline/text_header_check.h"
 #include "core/memory.h"
 
 #include <algorithm>
@@ -59,10 +60,14 @@ std::string volume_file_format(const fs::path& path) {
 }
 
 namespace {
-/// NIfTI files are checked before ITK sees them (ITK aborts on some corrupt headers).
+/// Every format's header is checked before ITK sees the file (ITK aborts on some corrupt NIfTI
+/// headers, and allocates whatever size a header announces).
 void check_before_reading(const fs::path& path, std::int64_t max_memory_bytes) {
-  if (volume_file_format(path).rfind("NIfTI", 0) == 0)
-    check_nifti_file(path, max_memory_bytes > 0 ? max_memory_bytes : default_memory_budget_bytes());
+  const std::int64_t budget = max_memory_bytes > 0 ? max_memory_bytes : default_memory_budget_bytes();
+  const std::string format = volume_file_format(path);
+  if (format.rfind("NIfTI", 0) == 0) check_nifti_file(path, budget);
+  else if (format == "NRRD") check_nrrd_file(path, budget);
+  else if (format == "MetaImage") check_metaimage_file(path, budget);
 }
 }  // namespace
 
