@@ -19,7 +19,8 @@ namespace organsmith {
 /// comments. Debian's toml++ 3.3 (a shared library) reaches an unreachable point when it asks
 /// whether such a character elsewhere is whitespace (U+00A1–U+0499 and U+FCA6–U+FEFE fall into
 /// an unhandled branch of its generated table; found by fuzz/fuzz_case_file.cpp), so they are
-/// refused first. A quote opens a string only where TOML allows one — at the start of a line or
+/// refused first, as is one right after a backslash in a multi-line basic string or after the
+/// whitespace that a line-ending backslash skips (toml++ tests those too). A quote opens a string only where TOML allows one — at the start of a line or
 /// after `=`, `[`, `,`, `{` or `.` — as toml++ reads it: `x = 2c"ä"` is a bare value with ä in it.
 inline std::pair<int, int> toml_non_ascii_outside_strings(std::string_view t) {
   int line = 1, col = 0;
@@ -42,7 +43,20 @@ inline std::pair<int, int> toml_non_ascii_outside_strings(std::string_view t) {
       const std::string_view close = t.substr(i, 3);
       const bool basic = close[0] == '"';
       advance(3);
-      while (i < t.size() && !starts(close)) advance(basic && t[i] == '\\' ? 2 : 1);
+      while (i < t.size() && !starts(close)) {
+        if (basic && t[i] == '\\' && i + 1 < t.size()) {
+          // After a backslash toml++ asks whether the next character is whitespace (a line-ending
+          // backslash), and then skips whitespace up to the next character: both are tested.
+          std::size_t j = i + 1;
+          while (j < t.size() && (t[j] == ' ' || t[j] == '\t' || t[j] == '\r' || t[j] == '\n')) ++j;
+          for (const std::size_t q : {i + 1, j})
+            if (q < t.size() && static_cast<unsigned char>(t[q]) >= 0x80) {
+              advance(q - i);
+              return {line, col + 1};
+            }
+        }
+        advance(basic && t[i] == '\\' ? 2 : 1);
+      }
       advance(3);
       prev = '"';
     } else if (string_may_start && (c == '"' || c == '\'')) {
