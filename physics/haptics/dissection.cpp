@@ -1,3 +1,7 @@
+// Over 400 lines: the liver bed found in the CT (crop, smoothing, intensity survey, opening,
+// connected region, probes) and the dissection path (bed score from any source, smoothing over
+// the surface, the iso-line, its checks) are one method in two halves sharing the surface's
+// vertex normals and score field; split them when a second user of the CT bed appears.
 #include "physics/haptics/dissection.h"
 
 #include "core/errors.h"
