@@ -138,7 +138,13 @@ int run_mesh(const MeshFlags& f) {
   }
 
   TerminalProgress progress;
-  const OrganMeshes meshes = mesh_organs(labels, options, progress);
+  OrganMeshes meshes;
+  try {
+    meshes = mesh_organs(labels, options, progress);
+  } catch (const Error& e) {  // meshing knows the labels, not their file: name it
+    if (!e.path().empty()) throw;
+    throw Error(e.code(), e.message(), f.input, e.hint());
+  }
   progress.finish();
   for (const auto& w : meshes.warnings) spdlog::warn("{}", w);
 

@@ -61,7 +61,8 @@ struct FileHeader {
   bool has_pixel_data = false;
   // For the direct path (uncompressed little-endian, no bit packing); GDCM decodes the rest.
   bool raw_little_endian = false;
-  int bits_allocated = 0, bits_stored = 0, pixel_representation = 0, samples_per_pixel = 1;
+  int bits_allocated = 0, bits_stored = 0, high_bit = 0, pixel_representation = 0, samples_per_pixel = 1;
+  std::string unreadable;  // a value that is there but is no number (the first one found)
   std::string photometric;
   double rescale_slope = 1.0, rescale_intercept = 0.0;
   std::uint64_t pixel_offset = 0, pixel_bytes = 0;  // of the pixel data value, when its length is defined
@@ -145,22 +146,31 @@ std::optional<FileHeader> read_header(const fs::path& path, const PixelLocation&
   }
   h.bits_allocated = us_value<0x0028, 0x0100>(ds);
   h.bits_stored = us_value<0x0028, 0x0101>(ds);
+  h.high_bit = us_value<0x0028, 0x0102>(ds);
   h.pixel_representation = us_value<0x0028, 0x0103>(ds);
   if (ds.FindDataElement(gdcm::Tag(0x0028, 0x0002))) h.samples_per_pixel = us_value<0x0028, 0x0002>(ds);
   h.photometric = string_value(ds, gdcm::Tag(0x0028, 0x0004));
-  if (const auto v = numbers(string_value(ds, gdcm::Tag(0x0028, 0x1053))); v.size() == 1) h.rescale_slope = v[0];
-  if (const auto v = numbers(string_value(ds, gdcm::Tag(0x0028, 0x1052))); v.size() == 1) h.rescale_intercept = v[0];
+  // A value that is present must be numbers, as many as the attribute has.
+  auto values = [&](std::uint16_t g, std::uint16_t e, std::size_t count, const char* name) {
+    const std::string text = string_value(ds, gdcm::Tag(g, e));
+    std::vector<double> v = numbers(text);
+    if (!text.empty() && v.size() != count && h.unreadable.empty())
+      h.unreadable = std::string(name) + " is '" + text.substr(0, 40) + "', not " + std::to_string(count) + " number(s)";
+    return v.size() == count ? v : std::vector<double>{};
+  };
+  if (const auto v = values(0x0028, 0x1053, 1, "Rescale Slope"); !v.empty()) h.rescale_slope = v[0];
+  if (const auto v = values(0x0028, 0x1052, 1, "Rescale Intercept"); !v.empty()) h.rescale_intercept = v[0];
   h.pixel_offset = pixels.offset;
   h.pixel_bytes = pixels.bytes;
   h.rows = us_value<0x0028, 0x0010>(ds);
   h.columns = us_value<0x0028, 0x0011>(ds);
   if (const auto f = numbers(string_value(ds, gdcm::Tag(0x0028, 0x0008))); f.size() == 1 && f[0] >= 1)
     h.frames = int(f[0]);
-  if (const auto p = numbers(string_value(ds, gdcm::Tag(0x0020, 0x0032))); p.size() == 3)
+  if (const auto p = values(0x0020, 0x0032, 3, "Image Position (Patient)"); !p.empty())
     h.position_lps_mm = Eigen::Vector3d(p[0], p[1], p[2]);
-  if (const auto o = numbers(string_value(ds, gdcm::Tag(0x0020, 0x0037))); o.size() == 6)
+  if (const auto o = values(0x0020, 0x0037, 6, "Image Orientation (Patient)"); !o.empty())
     h.orientation = std::array<double, 6>{o[0], o[1], o[2], o[3], o[4], o[5]};
-  if (const auto s = numbers(string_value(ds, gdcm::Tag(0x0028, 0x0030))); s.size() == 2)
+  if (const auto s = values(0x0028, 0x0030, 2, "Pixel Spacing"); !s.empty())
     h.pixel_spacing_mm = Eigen::Vector2d(s[0], s[1]);
   if (const auto t = numbers(string_value(ds, gdcm::Tag(0x0018, 0x0050))); t.size() == 1)
     h.slice_thickness_mm = t[0];
@@ -170,6 +180,41 @@ std::optional<FileHeader> read_header(const fs::path& path, const PixelLocation&
   // attributes; a truncated pixel payload is caught when decoding.
   h.has_pixel_data = h.rows > 0 && h.columns > 0;
   return h;
+}
+
+/// What makes a slice's pixel description unusable (empty when nothing does): checked before
+/// GDCM decodes it, as GDCM aborts on some of these and reads others as garbage.
+std::string pixel_module_problem(const FileHeader& h) {
+  if (!h.unreadable.empty()) return h.unreadable;
+  if (h.samples_per_pixel != 1)
+    return "has Samples per Pixel " + std::to_string(h.samples_per_pixel) + " (organsmith reads greyscale CT: 1)";
+  if (h.photometric != "MONOCHROME2" && h.photometric != "MONOCHROME1")
+    return "has Photometric Interpretation '" + h.photometric + "' (greyscale CT is MONOCHROME2)";
+  if (h.bits_allocated != 8 && h.bits_allocated != 16 && h.bits_allocated != 32)
+    return "has Bits Allocated " + std::to_string(h.bits_allocated) + " (8, 16 or 32 expected)";
+  if (h.bits_stored < 1 || h.bits_stored > h.bits_allocated || h.high_bit >= h.bits_allocated ||
+      h.high_bit + 1 < h.bits_stored)
+    return "has Bits Stored " + std::to_string(h.bits_stored) + " and High Bit " + std::to_string(h.high_bit) +
+           " that do not fit its Bits Allocated " + std::to_string(h.bits_allocated);
+  if (h.pixel_representation != 0 && h.pixel_representation != 1)
+    return "has Pixel Representation " + std::to_string(h.pixel_representation) + " (0 or 1 expected)";
+  if (h.pixel_bytes > 0) {  // native pixel data: its length is the image's
+    const std::uint64_t need = std::uint64_t(h.rows) * std::uint64_t(h.columns) * std::uint64_t(h.frames) *
+                               std::uint64_t(h.bits_allocated / 8);
+    if (h.pixel_bytes != need && h.pixel_bytes != need + 1)
+      return "holds " + std::to_string(h.pixel_bytes) + " bytes of pixel data where Rows " + std::to_string(h.rows) +
+             " × Columns " + std::to_string(h.columns) + " × Bits Allocated " + std::to_string(h.bits_allocated) +
+             (h.frames > 1 ? " × " + std::to_string(h.frames) + " frames" : std::string()) + " need " +
+             std::to_string(need);
+  }
+  if (!std::isfinite(h.rescale_slope) || !std::isfinite(h.rescale_intercept) || h.rescale_slope == 0 ||
+      std::abs(h.rescale_slope) > 1e4 || std::abs(h.rescale_intercept) > 1e6) {
+    std::ostringstream m;
+    m << "has Rescale Slope " << h.rescale_slope << " and Intercept " << h.rescale_intercept
+      << " (a non-zero slope up to 10⁴ and an intercept up to 10⁶ HU expected)";
+    return m.str();
+  }
+  return {};
 }
 
 std::vector<fs::path> list_files(const fs::path& input) {
@@ -351,6 +396,24 @@ IngestResult read_multiframe(const FileHeader& h, const IngestOptions& options, 
   return result;
 }
 
+/// What makes a slice's patient geometry unusable (empty when nothing does): spacing in
+/// (0, 1000] mm, a position within 10⁵ mm, orientation two orthogonal unit vectors (to 10⁻³).
+std::string geometry_problem(const FileHeader& h) {
+  std::ostringstream m;
+  if (h.pixel_spacing_mm && !((h.pixel_spacing_mm->array() > 0) && (h.pixel_spacing_mm->array() <= 1000)).all())
+    m << "Pixel Spacing " << (*h.pixel_spacing_mm)[0] << " \\ " << (*h.pixel_spacing_mm)[1] << " mm is not in (0, 1000] mm";
+  else if (h.position_lps_mm && !(h.position_lps_mm->array().abs() <= 1e5).all())
+    m << "Image Position (Patient) (" << h.position_lps_mm->transpose() << ") mm is not finite or beyond 100 m";
+  else if (h.orientation) {
+    const auto& o = *h.orientation;
+    const Eigen::Vector3d r(o[0], o[1], o[2]), c(o[3], o[4], o[5]);
+    if (!(std::abs(r.norm() - 1) < 1e-3 && std::abs(c.norm() - 1) < 1e-3 && std::abs(r.dot(c)) < 1e-3))
+      m << "Image Orientation (Patient) (" << r.transpose() << ", " << c.transpose()
+        << ") is not two orthogonal unit vectors";
+  }
+  return m.str();
+}
+
 /// Sorted slices of one series and its geometry, validated.
 struct Stack {
   std::vector<const FileHeader*> slices;  // sorted along the normal
@@ -358,12 +421,15 @@ struct Stack {
 };
 
 Stack build_stack(std::vector<const FileHeader*> slices, const IngestOptions& options,
-                  const std::vector<fs::path>& corrupt, const fs::path& input) {
+                  const std::vector<fs::path>& corrupt, const fs::path& input, const std::string& foreign_note) {
   const FileHeader& first = *slices.front();
   if (!first.orientation || !first.pixel_spacing_mm)
     throw InputError(ExitCode::unsupported_input,
                      "slice lacks Image Orientation (Patient) or Pixel Spacing", first.path,
                      "organsmith needs patient geometry to place the organs in millimetres");
+  if (const std::string why = geometry_problem(first); !why.empty())
+    throw InputError(ExitCode::bad_geometry, "the slice's " + why, first.path,
+                     "re-export the series; its patient geometry is damaged");
   const auto& o = *first.orientation;
   const Eigen::Vector3d row = Eigen::Vector3d(o[0], o[1], o[2]).normalized();
   const Eigen::Vector3d col = Eigen::Vector3d(o[3], o[4], o[5]).normalized();
@@ -373,6 +439,9 @@ Stack build_stack(std::vector<const FileHeader*> slices, const IngestOptions& op
     if (!h->position_lps_mm || !h->orientation)
       throw InputError(ExitCode::unsupported_input, "slice lacks Image Position (Patient)", h->path,
                        "organsmith sorts slices by position; this file cannot be placed");
+    if (const std::string why = geometry_problem(*h); !why.empty())
+      throw InputError(ExitCode::bad_geometry, "the slice's " + why, h->path,
+                       "re-export the series; its patient geometry is damaged");
     const auto& q = *h->orientation;
     const double dev = std::max((Eigen::Vector3d(q[0], q[1], q[2]).normalized() - row).norm(),
                                 (Eigen::Vector3d(q[3], q[4], q[5]).normalized() - col).norm());
@@ -428,7 +497,7 @@ Stack build_stack(std::vector<const FileHeader*> slices, const IngestOptions& op
         throw InputError(ExitCode::corrupt_file,
                          "a corrupt file leaves the series incomplete (" + m.str() + ")",
                          corrupt.front(), "re-export or re-transfer the corrupt file");
-      throw InputError(ExitCode::missing_slice, m.str(), input,
+      throw InputError(ExitCode::missing_slice, m.str() + foreign_note, input,
                        "re-export the complete series from the PACS or scanner");
     }
   }
@@ -440,8 +509,9 @@ Stack build_stack(std::vector<const FileHeader*> slices, const IngestOptions& op
   }
   if (worst > options.spacing_tolerance) {
     std::ostringstream m;
-    m << "slice spacing is not uniform: step " << fmt_mm(steps[worst_at]) << " after "
-      << slices[worst_at]->path.filename().string() << " differs from the median " << fmt_mm(median)
+    m << "slice spacing is not uniform: step " << fmt_mm(steps[worst_at]) << " between "
+      << slices[worst_at]->path.filename().string() << " and " << slices[worst_at + 1]->path.filename().string()
+      << " differs from the median " << fmt_mm(median)
       << " by " << std::lround(worst * 100) << " % (tolerance "
       << options.spacing_tolerance * 100 << " %)";
     throw InputError(ExitCode::nonuniform_spacing, m.str(), input,
@@ -500,6 +570,8 @@ IngestResult read_dicom(const fs::path& input, const IngestOptions& options, Pro
     // whose element lengths are consistent with their size.
     PixelLocation px;
     if (has_dicom_magic(files[a]) && structurally_complete(files[a], broken[a], px)) headers[a] = read_header(files[a], px);
+    if (headers[a] && headers[a]->has_pixel_data)
+      if (std::string why = pixel_module_problem(*headers[a]); !why.empty()) broken[a] = std::move(why), headers[a].reset();
     const std::size_t d = ++done;
     if (d % 64 == 0) progress.report(0.1 * double(d) / double(files.size()), "scanning DICOM headers");
   });
@@ -507,6 +579,7 @@ IngestResult read_dicom(const fs::path& input, const IngestOptions& options, Pro
   std::vector<fs::path> corrupt;  // DICOM by their preamble but unreadable
   std::map<std::string, std::vector<FileHeader>> series;
   std::size_t non_dicom = 0, non_image = 0;
+  std::string foreign_note;  // names of files that are not DICOM, for a missing slice's message
   std::vector<std::string> report_early;
   for (std::size_t a = 0; a < files.size(); ++a) {
     if (!headers[a]) {
@@ -515,7 +588,7 @@ IngestResult read_dicom(const fs::path& input, const IngestOptions& options, Pro
         report_early.push_back("skipped " + files[a].filename().string() + ": it " +
                                (broken[a].empty() ? std::string("cannot be parsed") : broken[a]));
       } else {
-        ++non_dicom;
+        if (++non_dicom <= 3) foreign_note += (non_dicom == 1 ? "; not DICOM here: " : ", ") + files[a].filename().string();
       }
       continue;
     }
@@ -580,7 +653,7 @@ IngestResult read_dicom(const fs::path& input, const IngestOptions& options, Pro
   // Pass 2: geometry from the headers, then decode every slice straight into its place.
   std::vector<const FileHeader*> slices;
   for (const auto& h : *chosen) slices.push_back(&h);
-  Stack stack = build_stack(slices, options, corrupt, input);
+  Stack stack = build_stack(slices, options, corrupt, input, foreign_note);
   Volume& vol = result.volume;
   auto decode_stack = [&](const Stack& st) {
     vol.grid = st.grid;
@@ -619,7 +692,7 @@ IngestResult read_dicom(const fs::path& input, const IngestOptions& options, Pro
   if (good.size() != stack.slices.size()) {
     // Without the corrupt slices the stack must still be complete (build_stack names the
     // corrupt file when it is not); the layout changed, so decode again.
-    stack = build_stack(good, options, corrupt, input);
+    stack = build_stack(good, options, corrupt, input, foreign_note);
     decode_stack(stack);
   }
   if (!corrupt.empty())

@@ -278,6 +278,8 @@ DicomStructure check_dicom_structure(std::uint64_t size, const ByteReader& read)
   try {
     Walker w(size, read, out);
     const std::uint64_t data_start = w.meta(132);
+    // A data set needs at least one element (GDCM asserts on a file that ends after its meta).
+    if (size < data_start + 8) throw Bad{"holds no data set after its file meta information"};
     const std::string& ts = out.transfer_syntax;
     if (ts == "1.2.840.10008.1.2.1.99") {  // deflated explicit VR little endian
       std::vector<unsigned char> inflated;

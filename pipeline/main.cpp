@@ -10,6 +10,7 @@
 #include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
 
+#include <cmath>
 #include <CLI/CLI.hpp>
 #include <spdlog/sinks/stdout_color_sinks.h>
 #include <spdlog/spdlog.h>
@@ -163,6 +164,24 @@ int cmd_run(const std::string& case_path, const std::string& out, bool force, co
   return 0;
 }
 
+/// The first option value that reads as a number but not a finite one ("nan", "inf", "1e999"),
+/// or empty. CLI11's range checks compare, and every comparison with NaN is false, so such a
+/// value would pass them and reach a stage; no option of organsmith takes one.
+std::string non_finite_option_value(int argc, char** argv) {
+  for (int a = 1; a < argc; ++a) {
+    std::string arg = argv[a];
+    std::string value;
+    if (const auto eq = arg.find('='); arg.rfind("--", 0) == 0 && eq != std::string::npos) value = arg.substr(eq + 1);
+    else if (a > 1 && std::string(argv[a - 1]).rfind("-", 0) == 0) value = arg;  // also "-inf"
+    if (value.empty()) continue;
+    char* end = nullptr;
+    const double v = std::strtod(value.c_str(), &end);
+    if (end && *end == '\0' && end != value.c_str() && !std::isfinite(v))
+      return (a > 1 && arg == value ? std::string(argv[a - 1]) + " " : std::string()) + arg;
+  }
+  return {};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -234,6 +253,10 @@ int main(int argc, char** argv) {
     for (auto& c : (*add)(app)) commands.push_back(std::move(c));
 
   try {
+    if (const std::string bad = non_finite_option_value(argc, argv); !bad.empty()) {
+      spdlog::error("'{}': an option value must be a finite number — see --help for its range", bad);
+      return int(ExitCode::usage);
+    }
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
     const int rc = app.exit(e);

@@ -21,7 +21,7 @@ namespace {
 constexpr int kHeaderBytes = 348;
 constexpr int kDimOffset = 40, kDatatypeOffset = 70, kBitpixOffset = 72, kPixdimOffset = 76;
 constexpr int kVoxOffsetOffset = 108, kQformCodeOffset = 252, kSformCodeOffset = 254;
-constexpr int kQuaternOffset = 256, kSrowOffset = 280, kMagicOffset = 344;
+constexpr int kQuaternOffset = 256, kSrowOffset = 280, kMagicOffset = 344, kSclSlopeOffset = 112;
 
 struct Reader {
   const std::uint8_t* p;
@@ -105,7 +105,7 @@ NiftiHeaderFacts check_nifti_file(const fs::path& path, std::int64_t max_memory_
   const std::int32_t swapped = r.get<std::int32_t>(0);
   r.swap = swapped == kHeaderBytes;  // a big-endian header read on this little-endian machine
   if (native != kHeaderBytes && swapped != kHeaderBytes) {
-    if (native == 540 || swapped == 540) {
+    if ((native == 540 || swapped == 540) && std::memcmp(h.data() + 4, "n+2", 4) == 0) {
       facts.version = 2;  // NIfTI-2: another layout, left to ITK's own checks
       return facts;
     }
@@ -147,10 +147,26 @@ NiftiHeaderFacts check_nifti_file(const fs::path& path, std::int64_t max_memory_
                           "the header's voxel size is corrupt; fix it (e.g. with nibabel) or use the DICOM series");
     facts.spacing_mm[std::size_t(d - 1)] = s;
   }
-  if (r.get<std::int16_t>(kQformCodeOffset) > 0)
-    for (int k = 0; k < 6; ++k)
-      if (!std::isfinite(r.get<float>(kQuaternOffset + 4 * k)))
+  if (r.get<std::int16_t>(kQformCodeOffset) > 0) {
+    double norm2 = 0;
+    for (int k = 0; k < 6; ++k) {
+      const float q = r.get<float>(kQuaternOffset + 4 * k);
+      if (!std::isfinite(q))
         throw GeometryError("the qform (quaternion or offset) is not finite", path, "the header's orientation is corrupt");
+      if (k < 3) norm2 += double(q) * q;
+    }
+    if (norm2 > 1.0 + 1e-4)  // b² + c² + d² ≤ 1: a = √(1 − b² − c² − d²)
+      throw GeometryError("the qform quaternion (b, c, d) is longer than 1", path, "the header's orientation is corrupt");
+  }
+  {  // Scaling: slope 0 means none (NIfTI-1); otherwise both finite and of CT magnitude.
+    const float slope = r.get<float>(kSclSlopeOffset), inter = r.get<float>(kSclSlopeOffset + 4);
+    if (slope != 0.0f && !std::isnan(slope) &&
+        (!std::isfinite(slope) || std::abs(slope) > 1e4f || !std::isfinite(inter) || std::abs(inter) > 1e6f))
+      throw InputError(ExitCode::unsupported_input,
+                       "scl_slope " + std::to_string(slope) + " and scl_inter " + std::to_string(inter) +
+                           " are not a CT scaling (a slope up to 10⁴, an intercept up to 10⁶)",
+                       path, "the header's scaling is corrupt");
+  }
   if (r.get<std::int16_t>(kSformCodeOffset) > 0) {
     double m[3][4];
     for (int row = 0; row < 3; ++row)

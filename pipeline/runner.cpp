@@ -216,7 +216,13 @@ class Runner {
     // "enforce" (the default): a figure still failing after the remedies stops the run (exit 61);
     // "report": it is a warning and quality.json records it.
     options.enforce_quality = mo.quality_gate == "enforce";
-    OrganMeshes meshes = mesh_organs(labels, options, progress_);
+    OrganMeshes meshes;
+    try {
+      meshes = mesh_organs(labels, options, progress_);
+    } catch (const Error& e) {  // meshing knows the labels, not their file: name it
+      if (!e.path().empty()) throw;
+      throw Error(e.code(), e.message(), layout_.labels(), e.hint());
+    }
     for (const auto& w : meshes.warnings) spdlog::warn("mesh: {}", w);
     for (const auto& organ : meshes.organs) {
       for (const auto& w : organ.warnings) spdlog::warn("mesh: {}", w);  // each names its organ

@@ -308,7 +308,7 @@ MassSeries parse_mass_csv(const std::string& text, const std::filesystem::path& 
   std::istringstream in(text);
   std::string line;
   int lineno = 0, col_t = -1, col_m = -1;
-  std::size_t ncols = 0;
+  std::size_t ncols = 0, lowest = 0;
   auto split = [](const std::string& l) {
     std::vector<std::string> out;
     std::string cell;
@@ -366,13 +366,15 @@ MassSeries parse_mass_csv(const std::string& text, const std::filesystem::path& 
       throw CalibrationDataError("line " + std::to_string(lineno) + ", column 'mass_fraction': " + fmt(mf) +
                                      " lies outside (0, " + fmt(1 + max_increase) + "]",
                                  source, "give the mass remaining as a fraction of the initial mass (1 = 100 %)");
-    for (std::size_t i = 0; i < s.mass_fraction.size(); ++i)
-      if (mf > s.mass_fraction[i] + max_increase)
+    // A rise is measured from the lowest mass so far (one comparison per row).
+    const std::size_t i = lowest;
+    if (!s.mass_fraction.empty() && mf > s.mass_fraction[i] + max_increase)
         throw CalibrationDataError("line " + std::to_string(lineno) + ", column 'mass_fraction': the mass rises from " +
                                        fmt(s.mass_fraction[i]) + " (line " + std::to_string(s.line[i]) + ") to " +
                                        fmt(mf) + ", more than " + fmt(max_increase) +
                                        " above an earlier value; a degrading clip does not gain mass",
                                    source, "check the column order and the units (fraction of the initial mass)");
+    if (!s.mass_fraction.empty() && mf < s.mass_fraction[lowest]) lowest = s.mass_fraction.size();
     s.t_days.push_back(t);
     s.mass_fraction.push_back(mf);
     s.line.push_back(lineno);

@@ -44,6 +44,20 @@ CliResult run_cli(const std::string& args) {
   return r;
 }
 
+CliResult run_cli_bounded(const std::string& args, int timeout_s, const fs::path& cwd) {
+  std::string cmd = (cwd.empty() ? std::string() : "cd " + quoted(cwd) + " && ") + "timeout -k 5 " +
+                    std::to_string(timeout_s) + " '" + ORGANSMITH_CLI + "' " + args + " 2>&1";
+  CliResult r;
+  FILE* pipe = popen(cmd.c_str(), "r");
+  if (!pipe) return r;
+  std::array<char, 4096> buf;
+  std::size_t n;
+  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) r.output.append(buf.data(), n);
+  const int status = pclose(pipe);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  return r;
+}
+
 int run_cli(const std::string& args, std::string* output) {
   CliResult r = run_cli(args);
   if (output) *output = std::move(r.output);

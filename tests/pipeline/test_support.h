@@ -32,6 +32,9 @@ struct CliResult {
 
 /// Runs the organsmith executable with `args` (shell-quoted by the caller where needed).
 CliResult run_cli(const std::string& args);
+/// Runs the organsmith executable with `args` in `cwd` (empty: the current directory) under
+/// timeout(1): exit 124 when it ran past `timeout_s` (then killed), 128 + n when signal n ended it.
+CliResult run_cli_bounded(const std::string& args, int timeout_s, const std::filesystem::path& cwd = {});
 /// The same, returning the exit code; the output goes to `*output` when given.
 int run_cli(const std::string& args, std::string* output);
 
