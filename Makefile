@@ -31,6 +31,8 @@ test: build
 # of everything that reads untrusted input — ingest of every format, case files, TOML, CSV,
 # segmentation, label-map checks before meshing, and the corpus suite, whose 412 hostile inputs
 # go through the instrumented CLI. CGAL's own code is left uninstrumented (meshing/CMakeLists.txt).
+# With -g, ccache would key each object on the checkout's path: CCACHE_NOHASHDIR lets a fresh
+# clone reuse what another one compiled (reports print the relative source paths either way).
 SAN_DIR ?= build-asan
 SAN_TARGETS = organsmith test_core test_pipeline test_corpus test_physics test_segmentation
 # Left out: BadInputs.InterruptAndKillMidRunThenRerun (its full run draws snapshots through Mesa
@@ -40,7 +42,7 @@ sanitize: deps
 	@cmake -S . -B $(SAN_DIR) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \
 	  -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g" -DORGANSMITH_SANITIZE=ON > $(SAN_DIR).configure.log 2>&1 \
 	  || { cat $(SAN_DIR).configure.log; exit 1; }
-	@cmake --build $(SAN_DIR) -j $(JOBS) --target $(SAN_TARGETS)
+	@CCACHE_NOHASHDIR=1 cmake --build $(SAN_DIR) -j $(JOBS) --target $(SAN_TARGETS)
 	@cd $(SAN_DIR) && ASAN_OPTIONS=detect_leaks=1:abort_on_error=0:exitcode=97 \
 	  LSAN_OPTIONS=suppressions=$(CURDIR)/tests/sanitizer/lsan.supp:exitcode=98 \
 	  UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:exitcode=96 \
