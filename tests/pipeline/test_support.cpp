@@ -31,8 +31,10 @@ ScratchDir::~ScratchDir() {
   fs::remove_all(path_, ec);
 }
 
-CliResult run_cli(const std::string& args) {
-  const std::string cmd = std::string("'") + ORGANSMITH_CLI + "' " + args + " 2>&1";
+namespace {
+
+/// Runs a shell command line, its output collected; a death by signal n gives `signal_base` + n.
+CliResult run_shell(const std::string& cmd, int signal_base) {
   CliResult r;
   FILE* pipe = popen(cmd.c_str(), "r");
   if (!pipe) return r;
@@ -40,22 +42,20 @@ CliResult run_cli(const std::string& args) {
   std::size_t n;
   while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) r.output.append(buf.data(), n);
   const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : (signal_base < 0 ? -1 : signal_base + WTERMSIG(status));
   return r;
 }
 
+}  // namespace
+
+CliResult run_cli(const std::string& args) {
+  return run_shell(std::string("'") + ORGANSMITH_CLI + "' " + args + " 2>&1", -1);
+}
+
 CliResult run_cli_bounded(const std::string& args, int timeout_s, const fs::path& cwd) {
-  std::string cmd = (cwd.empty() ? std::string() : "cd " + quoted(cwd) + " && ") + "timeout -k 5 " +
-                    std::to_string(timeout_s) + " '" + ORGANSMITH_CLI + "' " + args + " 2>&1";
-  CliResult r;
-  FILE* pipe = popen(cmd.c_str(), "r");
-  if (!pipe) return r;
-  std::array<char, 4096> buf;
-  std::size_t n;
-  while ((n = fread(buf.data(), 1, buf.size(), pipe)) > 0) r.output.append(buf.data(), n);
-  const int status = pclose(pipe);
-  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
-  return r;
+  return run_shell((cwd.empty() ? std::string() : "cd " + quoted(cwd) + " && ") + "timeout -k 5 " +
+                       std::to_string(timeout_s) + " '" + ORGANSMITH_CLI + "' " + args + " 2>&1",
+                   128);
 }
 
 int run_cli(const std::string& args, std::string* output) {
