@@ -2,6 +2,8 @@
 
 #include <csv.h>
 
+#include <cctype>
+#include <charconv>
 #include <sstream>
 
 namespace organsmith {
@@ -34,7 +36,7 @@ void on_row(int, void* data) {
 
 }  // namespace
 
-CsvTable parse_csv(const std::string& text, const std::filesystem::path& source, ExitCode code) {
+std::vector<CsvRow> parse_csv_rows(const std::string& text, const std::filesystem::path& source, ExitCode code) {
   csv_parser parser;
   if (csv_init(&parser, CSV_STRICT | CSV_STRICT_FINI) != 0) throw Error(code, "cannot start the CSV reader", source);
   Collector c;
@@ -62,19 +64,36 @@ CsvTable parse_csv(const std::string& text, const std::filesystem::path& source,
   }
   if (csv_fini(&parser, on_field, on_row, &c) != 0) fail("a quoted field is not closed");
   csv_free(&parser);
+  return std::move(c.rows);
+}
 
+CsvTable parse_csv(const std::string& text, const std::filesystem::path& source, ExitCode code) {
+  std::vector<CsvRow> rows = parse_csv_rows(text, source, code);
   CsvTable table;
-  if (c.rows.empty()) throw Error(code, "the CSV file has no header row", source, "the first line names the columns");
-  table.header = std::move(c.rows.front());
-  for (std::size_t i = 1; i < c.rows.size(); ++i) {
-    if (c.rows[i].fields.size() != table.header.fields.size())
+  if (rows.empty()) throw Error(code, "the CSV file has no header row", source, "the first line names the columns");
+  table.header = std::move(rows.front());
+  for (std::size_t i = 1; i < rows.size(); ++i) {
+    if (rows[i].fields.size() != table.header.fields.size())
       throw Error(code,
-                  "line " + std::to_string(c.rows[i].line) + " has " + std::to_string(c.rows[i].fields.size()) +
+                  "line " + std::to_string(rows[i].line) + " has " + std::to_string(rows[i].fields.size()) +
                       " fields where the header has " + std::to_string(table.header.fields.size()),
                   source, "give every row one field per column (an empty field is allowed: a,,c)");
-    table.rows.push_back(std::move(c.rows[i]));
+    table.rows.push_back(std::move(rows[i]));
   }
   return table;
+}
+
+std::optional<double> csv_number(std::string_view field) {
+  if (!field.empty() && field.front() == '+') field.remove_prefix(1);
+  double v = 0;
+  const auto r = std::from_chars(field.data(), field.data() + field.size(), v);
+  if (field.empty() || r.ec != std::errc() || r.ptr != field.data() + field.size()) return std::nullopt;
+  return v;
+}
+
+void lowercase_fields(CsvRow& row) {
+  for (auto& name : row.fields)
+    for (auto& ch : name) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
 }
 
 std::string csv_field(const std::string& field) {

@@ -14,4 +14,11 @@ inline std::string format_g(double v, int significant = 6) {
   return buf;
 }
 
+/// `v` with exactly `decimals` digits after the point, as printf's %.Nf.
+inline std::string format_fixed(double v, int decimals = 2) {
+  char buf[352];  // %.Nf of the largest double has 309 digits before the point
+  std::snprintf(buf, sizeof buf, "%.*f", decimals, v);
+  return buf;
+}
+
 }  // namespace organsmith

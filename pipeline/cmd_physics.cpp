@@ -4,6 +4,7 @@
 // of measurements), `uncertainty` (DC / IMVFOSM / Monte Carlo, thesis §4.1) and `materials` (the
 // thesis parameter sets embedded from data/materials.toml).
 
+#include "core/csv.h"
 #include "core/errors.h"
 #include "core/format.h"
 #include "physics/materials/calibration.h"
@@ -133,7 +134,7 @@ std::string fit_csv(const CalibrationData& d, const FitResult& r, bool cutting) 
                 : "specimen,load,stretch,lateral_stretch,stress_pa,model_stress_pa,residual_pa\n");
   for (std::size_t i = 0; i < d.points.size(); ++i) {
     const auto& p = d.points[i];
-    s << d.specimen[i] << ',' << load_name(p.load) << ',' << num(p.x) << ',';
+    s << csv_field(d.specimen[i]) << ',' << load_name(p.load) << ',' << num(p.x) << ',';
     if (!cutting) s << num(p.lateral_stretch) << ',';
     s << num(d.measured[i]) << ',' << num(r.predicted[i]) << ',' << num(r.predicted[i] - d.measured[i]) << '\n';
   }

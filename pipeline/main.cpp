@@ -1,6 +1,7 @@
 // The organsmith command line.
 
 #include "core/errors.h"
+#include "core/format.h"
 #include "pipeline/case_file.h"
 #include "pipeline/commands.h"
 #include "pipeline/ingest.h"
@@ -27,14 +28,8 @@ namespace fs = std::filesystem;
 
 namespace {
 
-std::string fixed(double v, int digits = 2) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.*f", digits, v);
-  return buf;
-}
-
 std::string vec(const Eigen::Vector3d& v, int digits = 2) {
-  return "(" + fixed(v.x(), digits) + ", " + fixed(v.y(), digits) + ", " + fixed(v.z(), digits) + ")";
+  return "(" + format_fixed(v.x(), digits) + ", " + format_fixed(v.y(), digits) + ", " + format_fixed(v.z(), digits) + ")";
 }
 
 /// Three-letter code of the patient directions the i, j, k axes point to (e.g. "LPS").
@@ -98,12 +93,12 @@ int cmd_info(const fs::path& input, const IngestFlags& flags, bool as_json) {
               << (s.description.empty() ? "" : ", \"" + s.description + "\"") << ", " << s.transfer_syntax << "\n";
   }
   std::cout << "size         " << g.size_vox[0] << " × " << g.size_vox[1] << " × " << g.size_vox[2] << " voxels\n"
-            << "spacing      " << fixed(g.spacing_mm.x(), 3) << " × " << fixed(g.spacing_mm.y(), 3) << " × "
-            << fixed(g.spacing_mm.z(), 3) << " mm\n"
+            << "spacing      " << format_fixed(g.spacing_mm.x(), 3) << " × " << format_fixed(g.spacing_mm.y(), 3) << " × "
+            << format_fixed(g.spacing_mm.z(), 3) << " mm\n"
             << "orientation  " << orientation_code(g.direction_lps) << " (axes i, j, k point to these patient directions)\n"
             << "origin       " << vec(g.origin_lps_mm) << " mm LPS (centre of voxel 0,0,0)\n"
             << "extent       " << vec(lo) << " to " << vec(hi) << " mm LPS\n"
-            << "HU range     " << fixed(r.report.hu_min, 0) << " to " << fixed(r.report.hu_max, 0) << "\n";
+            << "HU range     " << format_fixed(r.report.hu_min, 0) << " to " << format_fixed(r.report.hu_max, 0) << "\n";
   for (const auto& o : r.report.other_series)
     std::cout << "also seen    " << o.series_uid << " (" << o.modality << ", " << o.files << " files"
               << (o.description.empty() ? "" : ", \"" + o.description + "\"") << ") — read it with --series\n";
@@ -132,7 +127,7 @@ void list_written(const RunSummary& summary) {
   for (const auto& st : summary.stages) {
     std::map<std::string, int> per_dir;
     std::cout << "  stage " << st.name << (st.skipped ? " (unchanged, reused)" : "") << ", "
-              << fixed(st.seconds) << " s:\n";
+              << format_fixed(st.seconds) << " s:\n";
     for (const auto& o : st.outputs) {
       const fs::path p = o["path"].get<std::string>();
       if (p.parent_path().filename() == "dicom") {

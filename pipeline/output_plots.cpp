@@ -3,7 +3,10 @@
 
 #include "pipeline/output_plots.h"
 
+#include "core/csv.h"
 #include "core/errors.h"
+#include "core/file_io.h"
+#include "core/format.h"
 #include "physics/materials/presets.h"
 #include "physics/materials/uncertainty.h"
 #include "pipeline/output_layout.h"
@@ -34,58 +37,29 @@ nlohmann::json read_json_or_null(const fs::path& p) {
 
 namespace {
 
-/// A CSV with a header row, as columns by name (numbers; text columns kept as text).
-struct Csv {
-  std::vector<std::string> header;
-  std::vector<std::vector<std::string>> rows;
-  int column(const std::string& name) const {
-    for (std::size_t i = 0; i < header.size(); ++i)
-      if (header[i] == name) return int(i);
-    return -1;
+/// A results table another command wrote (fit.csv, cdf.csv); null when absent or malformed
+/// (said in the log: a review picture is skipped, not the run).
+std::optional<CsvTable> read_csv(const fs::path& p) {
+  const std::optional<std::string> text = read_file(p);
+  if (!text) return std::nullopt;
+  try {
+    return parse_csv(*text, p, ExitCode::unsupported_input);
+  } catch (const Error& e) {
+    spdlog::warn("{}; not drawn", e.what());
+    return std::nullopt;
   }
-};
-
-std::optional<Csv> read_csv(const fs::path& p) {
-  std::ifstream in(p);
-  if (!in) return std::nullopt;
-  Csv csv;
-  std::string line;
-  auto split = [](const std::string& l) {
-    std::vector<std::string> out;
-    std::stringstream ss(l);
-    std::string cell;
-    while (std::getline(ss, cell, ',')) {
-      while (!cell.empty() && (cell.back() == '\r' || cell.back() == ' ')) cell.pop_back();
-      out.push_back(cell);
-    }
-    return out;
-  };
-  if (!std::getline(in, line)) return std::nullopt;
-  csv.header = split(line);
-  while (std::getline(in, line))
-    if (!line.empty()) csv.rows.push_back(split(line));
-  return csv;
 }
 
-double number(const std::vector<std::string>& row, int col) {
-  if (col < 0 || std::size_t(col) >= row.size()) return std::nan("");
-  try {
-    return std::stod(row[col]);
-  } catch (const std::exception&) {
-    return std::nan("");
-  }
+/// The number in a row's column, NaN when absent or not a number.
+double number(const CsvRow& row, int col) {
+  if (col < 0 || std::size_t(col) >= row.fields.size()) return std::nan("");
+  return csv_number(row.fields[std::size_t(col)]).value_or(std::nan(""));
 }
 
 // Series colours for several curves on one chart (colour-blind friendly order).
 const Rgb kSeriesColours[] = {{0.00, 0.45, 0.70}, {0.84, 0.37, 0.00}, {0.00, 0.62, 0.45}, {0.80, 0.47, 0.65},
                               {0.34, 0.71, 0.91}, {0.90, 0.62, 0.00}, {0.35, 0.35, 0.35}};
 Rgb series_colour(std::size_t i) { return kSeriesColours[i % std::size(kSeriesColours)]; }
-
-std::string fmt(const char* f, double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
-}
 
 }  // namespace
 
@@ -116,8 +90,8 @@ std::optional<Plot> calibration_fit_plot(const fs::path& dir, const std::string&
     return v.size() - 1;
   };
   for (const auto& row : csv->rows) {
-    const std::string spec = cs >= 0 && std::size_t(cs) < row.size() ? row[cs] : "";
-    std::string load = cl >= 0 && std::size_t(cl) < row.size() ? row[cl] : "";
+    const std::string spec = cs >= 0 ? row.fields[std::size_t(cs)] : "";
+    std::string load = cl >= 0 ? row.fields[std::size_t(cl)] : "";
     if (load.rfind("uniaxial-", 0) == 0) load = load.substr(9);
     const double x0 = number(row, cx), m = number(row, cm), f = number(row, cf);
     if (!std::isfinite(x0) || !std::isfinite(m) || !std::isfinite(f)) continue;
@@ -144,9 +118,9 @@ std::optional<Plot> calibration_fit_plot(const fs::path& dir, const std::string&
   p.y_label = cutting ? "force (N)" : "nominal stress (kPa)";
   std::string note = fs::path(params.value("data", std::string("?"))).filename().string() + "  |  " +
                      std::to_string(params.value("points", 0)) + " points";
-  if (params.contains("r2") && params["r2"].is_number()) note += "  |  R² " + fmt("%.4f", params["r2"].get<double>());
+  if (params.contains("r2") && params["r2"].is_number()) note += "  |  R² " + format_fixed(params["r2"].get<double>(), 4);
   if (params.contains("rmse") && params["rmse"].is_number())
-    note += ", RMSE " + fmt("%.4g", params["rmse"].get<double>()) + (cutting ? " N" : " Pa");
+    note += ", RMSE " + format_g(params["rmse"].get<double>(), 4) + (cutting ? " N" : " Pa");
   p.note = note + "  |  " + dir.filename().string();
   std::size_t shown = 0;
   for (const auto& load : loads) {
@@ -203,7 +177,7 @@ std::optional<Plot> monte_carlo_plot(const fs::path& dir, const std::string& ste
   }
   for (std::size_t i = 0; i < order.size(); ++i) {
     PlotSeries s = std::move(by_stretch[order[i]]);
-    s.name = "stretch " + fmt("%.3g", order[i]);
+    s.name = "stretch " + format_g(order[i], 3);
     s.colour = series_colour(i);
     p.series.push_back(std::move(s));
   }
@@ -322,7 +296,7 @@ std::vector<Plot> material_plots(const fs::path& out, const OrganRegistry& regis
         const int k = int(std::lround((s - 1.0) / (kMaxStretch - 1.0) * 60.0)) - 1;
         const auto q = physics::stress_quantiles(mc, k, levels_all);
         PlotSeries ser;
-        ser.name = "stretch " + fmt("%.2f", pts[k].x);
+        ser.name = "stretch " + format_fixed(pts[k].x, 2);
         ser.colour = series_colour(c++);
         ser.x.resize(q.size());
         std::copy(q.begin(), q.end(), ser.x.begin());

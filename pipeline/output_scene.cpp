@@ -114,14 +114,14 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
                      "give the directory `organsmith run --out` wrote (default: out)");
   SnapshotScene& scene = os.scene;
   const nlohmann::json manifest = read_json_or_null(OutputLayout{out}.manifest());
-  scene.case_name = out.filename().string();
-  if (manifest.is_object() && manifest.contains("case") && manifest["case"].is_object())
+  scene.case_name = flags.case_name.empty() ? out.filename().string() : flags.case_name;
+  if (flags.case_name.empty() && manifest.is_object() && manifest.contains("case") && manifest["case"].is_object())
     scene.case_name = manifest["case"].value("name", scene.case_name);
 
   // Organs: those of the case, else every organ of the registry with a model.
   const OrganRegistry registry = flags.registry ? *flags.registry : registry_of_output(out);
-  std::vector<std::string> organ_names;
-  if (manifest.is_object() && manifest.contains("case") && manifest["case"].contains("organs"))
+  std::vector<std::string> organ_names = flags.organs;
+  if (organ_names.empty() && manifest.is_object() && manifest.contains("case") && manifest["case"].contains("organs"))
     for (const auto& o : manifest["case"]["organs"])
       if (o.is_object() && o.contains("name")) organ_names.push_back(o["name"].get<std::string>());
   if (organ_names.empty()) organ_names = registry.modelled();

@@ -48,6 +48,9 @@ struct LoadFlags {
   const Volume* ct_volume = nullptr;
   const LabelMap* label_map = nullptr;
   const OrganMeshes* meshes = nullptr;  ///< the mesh stage's result, LPS mm
+  /// The running case's name and organs (empty = as the directory's manifest records them).
+  std::string case_name;
+  std::vector<std::string> organs;
 };
 
 /// The calibrated law of an organ region ("gallbladder_body", "trachea_wall", …): from

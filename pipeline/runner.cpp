@@ -90,6 +90,53 @@ nlohmann::json grid_json(const ImageGrid& g) {
           {"direction_lps_columns", dir}};
 }
 
+/// An organ's seed as the ingest stage resolved it (ingest.json "organs").
+struct OrganSeed {
+  std::string organ;
+  std::optional<Eigen::Vector3d> lps_mm;
+  std::string source;  ///< "case file (LPS mm)", "phantom seeds.json", "automatic", …
+};
+
+/// ingest.json's "organs": the writer of the seeds …
+nlohmann::json ingest_seeds_json(const std::vector<OrganSeed>& seeds, const ImageGrid& grid) {
+  nlohmann::json organs = nlohmann::json::array();
+  for (const auto& s : seeds) {
+    nlohmann::json oj = {{"name", s.organ}};
+    if (s.lps_mm) {
+      const Eigen::Vector3d ijk = grid.lps_mm_to_index(*s.lps_mm);
+      oj["seed_lps_mm"] = {s.lps_mm->x(), s.lps_mm->y(), s.lps_mm->z()};
+      oj["seed_ijk"] = {ijk.x(), ijk.y(), ijk.z()};
+    }
+    oj["seed_source"] = s.source;
+    organs.push_back(oj);
+  }
+  return organs;
+}
+
+/// … and its reader, for a run that reuses the ingest stage.
+std::vector<OrganSeed> read_ingest_seeds(const fs::path& ingest_json) {
+  const std::optional<std::string> text = read_file(ingest_json);
+  if (!text)
+    throw InputError(ExitCode::input_not_found, "the ingest stage's record is missing", ingest_json,
+                     "run the case from its start (organsmith run CASE)");
+  std::vector<OrganSeed> seeds;
+  try {
+    const nlohmann::json j = nlohmann::json::parse(*text);
+    for (const auto& o : j.at("organs")) {
+      OrganSeed s{o.at("name").get<std::string>(), std::nullopt, o.value("seed_source", "")};
+      if (o.contains("seed_lps_mm")) {
+        const auto& p = o["seed_lps_mm"];
+        s.lps_mm = Eigen::Vector3d(p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>());
+      }
+      seeds.push_back(std::move(s));
+    }
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(ExitCode::unsupported_input, std::string("the ingest stage's record is malformed: ") + e.what(),
+                     ingest_json, "rerun the case with --force to read the input again");
+  }
+  return seeds;
+}
+
 struct Stage {
   std::string name;
   std::string fingerprint;
@@ -332,12 +379,11 @@ class Runner {
 
   /// snapshot renders the review PNGs of everything the earlier stages left in the output.
   void write_snapshots(const fs::path& staging) {
-    // The scene loader reads the case (organs, input) from the manifest: record the stages so
-    // far first (the final manifest replaces it when the run ends).
-    out_dir_.write_manifest(manifest_header());
     LoadFlags flags;
     flags.ct = input_.string();
     flags.registry = &case_.registry;
+    flags.case_name = case_.name;
+    for (const auto& o : case_.organs) flags.organs.push_back(o.name);
     if (volume_) flags.ct_volume = &*volume_;  // this run's, in memory (else read again)
     if (labels_) flags.label_map = &*labels_;
     if (meshes_ && !case_.stages.mesh.ras) flags.meshes = &*meshes_;
@@ -386,17 +432,13 @@ class Runner {
   /// organs with a segmentation preset found by the GVF snakes, the others taken from their label
   /// maps.
   void write_segmentation(const fs::path& staging) {
-    std::ifstream in(layout_.ingest());
-    const nlohmann::json ingest_json = nlohmann::json::parse(in);
     std::vector<OrganRequest> requests;
-    for (const auto& o : ingest_json.at("organs")) {
+    for (const OrganSeed& seed : organ_seeds()) {
       OrganRequest r;
-      r.organ = o.at("name").get<std::string>();
+      r.organ = seed.organ;
       const OrganSpec* spec = case_organ(r.organ);
       if (spec && !spec->label_map.empty()) continue;
-      if (o.contains("seed_lps_mm"))
-        r.seed_lps_mm = Eigen::Vector3d(o["seed_lps_mm"][0].get<double>(), o["seed_lps_mm"][1].get<double>(),
-                                        o["seed_lps_mm"][2].get<double>());
+      r.seed_lps_mm = seed.lps_mm;
       // An organ found automatically ignores a phantom seed (a hint for reviewers only).
       if (!case_.registry.at(r.organ).needs_seed && !case_has_seed(r.organ)) r.seed_lps_mm.reset();
       requests.push_back(std::move(r));
@@ -462,37 +504,40 @@ class Runner {
         j["other_series"].push_back({{"series_uid", s.series_uid}, {"modality", s.modality}, {"files", s.files}});
     }
     j["warnings"] = r.report.warnings;
-    j["organs"] = resolve_seeds(r.volume.grid);
+    seeds_ = resolve_seeds(r.volume.grid);
+    j["organs"] = ingest_seeds_json(*seeds_, r.volume.grid);
     input_json_ = {{"format", j["format"]}, {"digest_sha256", input_digest_}, {"grid", j["grid"]}};
     write_text_atomic(OutputLayout{staging}.ingest(), j.dump(2) + "\n");
     volume_ = std::move(r.volume);
   }
 
-  nlohmann::json resolve_seeds(const ImageGrid& grid) {
+  /// Each organ's seed in LPS mm (case file, else the phantom's seeds.json) and where it came from.
+  std::vector<OrganSeed> resolve_seeds(const ImageGrid& grid) {
     std::map<std::string, Eigen::Vector3d> phantom_seeds;
     if (case_.synthesize_phantom) phantom_seeds = read_seeds(layout_.phantom_seeds());
-    nlohmann::json organs = nlohmann::json::array();
+    std::vector<OrganSeed> seeds;
     for (const auto& o : case_.organs) {
-      nlohmann::json oj = {{"name", o.name}};
-      std::optional<Eigen::Vector3d> p;
-      std::string source;
-      if (o.seed_lps_mm) p = o.seed_lps_mm, source = "case file (LPS mm)";
-      else if (o.seed_ijk) p = grid.index_to_lps_mm(*o.seed_ijk), source = "case file (voxel ijk)";
-      else if (phantom_seeds.count(o.name)) p = phantom_seeds[o.name], source = "phantom seeds.json";
-      else if (!o.label_map.empty()) source = "label map";
-      else source = case_.registry.at(o.name).needs_seed ? "none" : "automatic";
-      if (p) {
-        const Eigen::Vector3d ijk = grid.lps_mm_to_index(*p);
+      OrganSeed s{o.name, std::nullopt, {}};
+      if (o.seed_lps_mm) s.lps_mm = o.seed_lps_mm, s.source = "case file (LPS mm)";
+      else if (o.seed_ijk) s.lps_mm = grid.index_to_lps_mm(*o.seed_ijk), s.source = "case file (voxel ijk)";
+      else if (phantom_seeds.count(o.name)) s.lps_mm = phantom_seeds[o.name], s.source = "phantom seeds.json";
+      else if (!o.label_map.empty()) s.source = "label map";
+      else s.source = case_.registry.at(o.name).needs_seed ? "none" : "automatic";
+      if (s.lps_mm) {
+        const Eigen::Vector3d ijk = grid.lps_mm_to_index(*s.lps_mm);
         if (!grid.contains(std::lround(ijk.x()), std::lround(ijk.y()), std::lround(ijk.z())))
           throw InputError(ExitCode::bad_seed, "the seed of organ '" + o.name + "' lies outside the image",
                            case_.source, "check the seed: LPS mm as shown by `organsmith info`");
-        oj["seed_lps_mm"] = {p->x(), p->y(), p->z()};
-        oj["seed_ijk"] = {ijk.x(), ijk.y(), ijk.z()};
       }
-      oj["seed_source"] = source;
-      organs.push_back(oj);
+      seeds.push_back(std::move(s));
     }
-    return organs;
+    return seeds;
+  }
+
+  /// The organ seeds: this run's ingest stage's, else read back from its ingest.json.
+  const std::vector<OrganSeed>& organ_seeds() {
+    if (!seeds_) seeds_ = read_ingest_seeds(layout_.ingest());
+    return *seeds_;
   }
 
   /// The case's own organ registry, when it has one (empty otherwise: the embedded registry is
@@ -592,6 +637,7 @@ class Runner {
   std::optional<Volume> volume_;
   std::optional<LabelMap> labels_;
   std::optional<OrganMeshes> meshes_;
+  std::optional<std::vector<OrganSeed>> seeds_;
   bool done_ = false;     // set once the --until stage has run
   bool started_ = false;  // set at the --from stage
   nlohmann::json input_json_ = nlohmann::json::object();

@@ -4,6 +4,7 @@
 
 #include "viewer/snapshot.h"
 
+#include "core/format.h"
 #include "viewer/detail/slice.h"
 #include "viewer/detail/vtk_scene.h"
 
@@ -50,12 +51,6 @@ const Rgb kDarkText{0.08, 0.09, 0.12};
 const Rgb kGreyText{0.30, 0.32, 0.36};
 const Rgb kLightText{0.95, 0.95, 0.95};
 const Rgb kContourYellow{1.0, 0.88, 0.1};
-
-std::string fmt(const char* f, double v) {
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
-}
 
 std::string capitalised(std::string s) {
   if (!s.empty()) s[0] = char(std::toupper(static_cast<unsigned char>(s[0])));
@@ -333,7 +328,7 @@ struct SnapshotRenderer::Impl {
       const double len = any ? 0.12 * std::max({b[1] - b[0], b[3] - b[2], b[5] - b[4]}) : 20.0;
       for (auto& p : tool_props(*scene.tool, len, Rgb{0.2, 0.75, 0.95})) r->AddViewProp(p);
       legend.emplace_back("tool", Rgb{0.2, 0.75, 0.95});
-      if (scene.tool->force_N) legend.emplace_back("force " + fmt("%.2f N", scene.tool->force_N->norm()), Rgb{0.85, 0.1, 0.1});
+      if (scene.tool->force_N) legend.emplace_back("force " + format_fixed(scene.tool->force_N->norm(), 2) + " N", Rgb{0.85, 0.1, 0.1});
       visible_bounds(r, b);
     }
     const int vh = L.h - L.band;
@@ -489,8 +484,8 @@ struct SnapshotRenderer::Impl {
     const int axis_index = axis == SliceAxis::axial ? 2 : axis == SliceAxis::coronal ? 1 : 0;
     const char* axis_letter = axis == SliceAxis::axial ? "S" : axis == SliceAxis::coronal ? "P" : "L";
     std::string detail = (scene.case_name.empty() ? "" : scene.case_name + "  |  ") + axis_letter + " = " +
-                         fmt("%.1f mm", centre[axis_index]) + " (LPS)  |  W " + fmt("%.0f", opt.hu_window) + " / L " +
-                         fmt("%.0f", opt.hu_level) + " HU  |  outline: " +
+                         format_fixed(centre[axis_index], 1) + " mm (LPS)  |  W " + format_fixed(opt.hu_window, 0) + " / L " +
+                         format_fixed(opt.hu_level, 0) + " HU  |  outline: " +
                          (scene.labels_source.empty() ? std::string("label map") : scene.labels_source) + " voxels";
     if (contour_pd) detail += ", yellow: its contour";
     window->AddRenderer(title_band(L, capitalised(organ.name) + " - " + slice_axis_name(axis) + " slice through its centroid",
@@ -568,11 +563,11 @@ struct SnapshotRenderer::Impl {
     std::vector<double> sorted = all_q;
     std::sort(sorted.begin(), sorted.end());
     const double qmin = sorted.empty() ? 0 : sorted.front(), qmed = sorted.empty() ? 0 : sorted[sorted.size() / 2];
-    r->AddViewProp(text("cut: coronal plane P = " + fmt("%.1f mm", centre.y()) + ", front half removed; whole tets shown",
+    r->AddViewProp(text("cut: coronal plane P = " + format_fixed(centre.y(), 1) + " mm, front half removed; whole tets shown",
                         std::max(10, vh / 52), kGreyText, L.w - 0.015 * L.w, 0.02 * vh, 2, 0));
     const std::string detail = std::to_string(m.tets.size()) + " tets (" + std::to_string(keep.size()) +
-                               " shown)  |  radius ratio 3 r_in / R_circ (1 = regular): min " + fmt("%.3f", qmin) +
-                               ", median " + fmt("%.3f", qmed);
+                               " shown)  |  radius ratio 3 r_in / R_circ (1 = regular): min " + format_fixed(qmin, 3) +
+                               ", median " + format_fixed(qmed, 3);
     window->AddRenderer(title_band(L, capitalised(t.organ) + " - tetrahedral mesh, cut, coloured by quality", detail,
                                    Rgb{1, 1, 1}, kDarkText, kGreyText));
     window->AddRenderer(r);

@@ -1,6 +1,7 @@
 // Over 400 lines: one simulation loop (strain energy per element, degradation law,
 // re-minimisation, fracture) and the τ_D fit that runs it.
 #include "physics/degradation/degradation.h"
+#include "core/csv.h"
 #include "core/file_io.h"
 #include "core/format.h"
 
@@ -10,11 +11,9 @@
 
 #include <algorithm>
 #include <array>
-#include <cctype>
 #include <cmath>
 #include <cstdlib>
 #include <limits>
-#include <sstream>
 
 namespace organsmith::physics {
 
@@ -305,53 +304,36 @@ DegradationResult simulate_degradation(const ClipModel& m, const DegradationOpti
 MassSeries parse_mass_csv(const std::string& text, const std::filesystem::path& source, double max_increase) {
   MassSeries s;
   s.source = source;
-  std::istringstream in(text);
-  std::string line;
-  int lineno = 0, col_t = -1, col_m = -1;
-  std::size_t ncols = 0, lowest = 0;
-  auto split = [](const std::string& l) {
-    std::vector<std::string> out;
-    std::string cell;
-    std::istringstream ls(l);
-    while (std::getline(ls, cell, ',')) {
-      const auto b = cell.find_first_not_of(" \t\r"), e = cell.find_last_not_of(" \t\r");
-      out.push_back(b == std::string::npos ? "" : cell.substr(b, e - b + 1));
-    }
-    if (!l.empty() && l.back() == ',') out.emplace_back();
-    return out;
-  };
   const std::string hint = "a mass series is a CSV with columns t_days and mass_fraction (1 = initial mass)";
-  while (std::getline(in, line)) {
-    ++lineno;
-    if (line.find_first_not_of(" \t\r") == std::string::npos) continue;
-    const auto cells = split(line);
-    if (col_t < 0) {
-      for (std::size_t c = 0; c < cells.size(); ++c) {
-        std::string h = cells[c];
-        for (auto& ch : h) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
-        if (h == "t_days") col_t = static_cast<int>(c);
-        if (h == "mass_fraction") col_m = static_cast<int>(c);
-      }
-      if (col_t < 0 || col_m < 0)
-        throw CalibrationDataError("line " + std::to_string(lineno) + ": the header lacks " +
-                                       std::string(col_t < 0 ? "'t_days'" : "'mass_fraction'"),
-                                   source, hint);
-      ncols = cells.size();
-      continue;
-    }
-    if (cells.size() != ncols)
+  std::vector<CsvRow> rows = parse_csv_rows(text, source, ExitCode::calibration_data);
+  if (rows.empty()) throw CalibrationDataError("the file is empty", source, hint);
+  lowercase_fields(rows.front());
+  const std::vector<std::string>& header = rows.front().fields;
+  int col_t = -1, col_m = -1;
+  for (std::size_t c = 0; c < header.size(); ++c) {
+    if (header[c] == "t_days") col_t = static_cast<int>(c);
+    if (header[c] == "mass_fraction") col_m = static_cast<int>(c);
+  }
+  if (col_t < 0 || col_m < 0)
+    throw CalibrationDataError("line " + std::to_string(rows.front().line) + ": the header lacks " +
+                                   std::string(col_t < 0 ? "'t_days'" : "'mass_fraction'"),
+                               source, hint);
+  std::size_t lowest = 0;
+  for (std::size_t r = 1; r < rows.size(); ++r) {
+    const int lineno = rows[r].line;
+    const std::vector<std::string>& cells = rows[r].fields;
+    if (cells.size() != header.size())
       throw CalibrationDataError("line " + std::to_string(lineno) + ": " + std::to_string(cells.size()) +
-                                     " fields, the header has " + std::to_string(ncols),
+                                     " fields, the header has " + std::to_string(header.size()),
                                  source, hint);
     auto number = [&](int c, const char* name) {
       const std::string& cell = cells[static_cast<std::size_t>(c)];
-      char* end = nullptr;
-      const double v = std::strtod(cell.c_str(), &end);
-      if (cell.empty() || end != cell.c_str() + cell.size() || !std::isfinite(v))
+      const std::optional<double> v = csv_number(cell);
+      if (!v || !std::isfinite(*v))
         throw CalibrationDataError("line " + std::to_string(lineno) + ", column '" + name + "': '" + cell +
                                        "' is not a finite number",
                                    source, hint);
-      return v;
+      return *v;
     };
     const double t = number(col_t, "t_days"), mf = number(col_m, "mass_fraction");
     if (t < 0)
@@ -379,7 +361,6 @@ MassSeries parse_mass_csv(const std::string& text, const std::filesystem::path& 
     s.mass_fraction.push_back(mf);
     s.line.push_back(lineno);
   }
-  if (col_t < 0) throw CalibrationDataError("the file is empty", source, hint);
   if (s.t_days.size() < 3)
     throw CalibrationDataError("only " + std::to_string(s.t_days.size()) + " rows; τ_D needs at least 3 points",
                                source, hint);

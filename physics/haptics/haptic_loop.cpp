@@ -1,12 +1,13 @@
 #include "physics/haptics/haptic_loop.h"
 
+#include "core/csv.h"
 #include "core/errors.h"
+#include "core/file_io.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <fstream>
-#include <sstream>
+#include <optional>
 #include <string>
 
 #if defined(__linux__)
@@ -80,54 +81,45 @@ ScriptedDevice::ScriptedDevice(std::vector<double> t, std::vector<Eigen::Vector3
 }
 
 ScriptedDevice ScriptedDevice::read_csv(const fs::path& path) {
-  std::ifstream in(path);
-  if (!in) throw InputError(ExitCode::input_not_found, "cannot read the trajectory file", path, "check the file name");
+  const std::optional<std::string> text = read_file(path);
+  if (!text) throw InputError(ExitCode::input_not_found, "cannot read the trajectory file", path, "check the file name");
+  const std::string hint = "a trajectory is CSV with header t_s,x,y,z (seconds, LPS mm), time strictly increasing";
   auto bad = [&](int line, const std::string& what) {
-    return InputError(ExitCode::unsupported_input, "line " + std::to_string(line) + ": " + what, path,
-                      "a trajectory is CSV with header t_s,x,y,z (seconds, LPS mm), time strictly increasing");
+    return InputError(ExitCode::unsupported_input, "line " + std::to_string(line) + ": " + what, path, hint);
   };
-  std::string line;
-  int lineno = 0;
+  std::vector<CsvRow> rows;
+  try {
+    rows = parse_csv_rows(*text, path, ExitCode::unsupported_input);
+  } catch (const Error& e) {
+    throw InputError(e.code(), e.message(), path, hint);
+  }
+  if (rows.empty()) throw InputError(ExitCode::unsupported_input, "the trajectory file is empty", path, hint);
+  lowercase_fields(rows.front());
+  const std::vector<std::string>& header = rows.front().fields;
   std::array<int, 4> col{-1, -1, -1, -1};
-  std::size_t ncols = 0;
+  for (std::size_t c = 0; c < header.size(); ++c) {
+    const std::string& n = header[c];
+    if (n == "t_s" || n == "t" || n == "time_s") col[0] = int(c);
+    for (int a = 0; a < 3; ++a) {
+      const std::string base(1, "xyz"[a]);
+      if (n == base || n == base + "_mm" || n == base + "_lps_mm") col[std::size_t(a + 1)] = int(c);
+    }
+  }
+  if (*std::min_element(col.begin(), col.end()) < 0) throw bad(rows.front().line, "the header must name t_s, x, y and z");
   std::vector<double> t;
   std::vector<Eigen::Vector3d> p;
-  while (std::getline(in, line)) {
-    ++lineno;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    const auto first = line.find_first_not_of(" \t");
-    if (first == std::string::npos || line[first] == '#') continue;
-    std::vector<std::string> f;
-    std::stringstream ss(line);
-    std::string cell;
-    while (std::getline(ss, cell, ',')) {
-      const auto a = cell.find_first_not_of(" \t"), b = cell.find_last_not_of(" \t");
-      f.push_back(a == std::string::npos ? "" : cell.substr(a, b - a + 1));
-    }
-    if (!line.empty() && line.back() == ',') f.emplace_back();
-    if (ncols == 0) {
-      ncols = f.size();
-      for (std::size_t c = 0; c < f.size(); ++c) {
-        std::string n = f[c];
-        std::transform(n.begin(), n.end(), n.begin(), [](unsigned char ch) { return char(std::tolower(ch)); });
-        if (n == "t_s" || n == "t" || n == "time_s") col[0] = int(c);
-        for (int a = 0; a < 3; ++a) {
-          const std::string base(1, "xyz"[a]);
-          if (n == base || n == base + "_mm" || n == base + "_lps_mm") col[std::size_t(a + 1)] = int(c);
-        }
-      }
-      if (*std::min_element(col.begin(), col.end()) < 0) throw bad(lineno, "the header must name t_s, x, y and z");
-      continue;
-    }
-    if (f.size() != ncols)
-      throw bad(lineno, std::to_string(f.size()) + " fields where the header has " + std::to_string(ncols));
+  for (std::size_t r = 1; r < rows.size(); ++r) {
+    const int lineno = rows[r].line;
+    const std::vector<std::string>& f = rows[r].fields;
+    if (f.size() != header.size())
+      throw bad(lineno, std::to_string(f.size()) + " fields where the header has " + std::to_string(header.size()));
     double v[4];
     for (int k = 0; k < 4; ++k) {
       const std::string& s = f[std::size_t(col[std::size_t(k)])];
-      char* end = nullptr;
-      v[k] = std::strtod(s.c_str(), &end);
-      if (s.empty() || end != s.c_str() + s.size() || !std::isfinite(v[k]))
+      const std::optional<double> parsed = csv_number(s);
+      if (!parsed || !std::isfinite(*parsed))
         throw bad(lineno, "'" + s + "' is not a finite number (column " + std::string(k == 0 ? "t_s" : std::string(1, "xyz"[k - 1])) + ")");
+      v[k] = *parsed;
     }
     if (!t.empty() && !(v[0] > t.back()))
       throw bad(lineno, "time " + f[std::size_t(col[0])] + " s does not increase (previous " + std::to_string(t.back()) + " s)");

@@ -5,6 +5,7 @@
 
 #include "core/errors.h"
 #include "core/file_io.h"
+#include "core/format.h"
 #include "physics/haptics/contact.h"
 
 #include <Eigen/Eigenvalues>
@@ -38,12 +39,6 @@ Eigen::Vector3d point_at(const std::vector<Eigen::Vector3d>& p, const std::vecto
   const double len = cum[i + 1] - cum[i];
   const double f = len > 0 ? (s - cum[i]) / len : 0.0;
   return p[i] + f * (p[i + 1] - p[i]);
-}
-
-std::string fmt(double v, const char* f = "%.4f") {
-  char b[64];
-  std::snprintf(b, sizeof b, f, v);
-  return b;
 }
 
 /// Exact 1-D squared distance transform (lower envelope of parabolas) of f sampled every h mm.
@@ -429,8 +424,8 @@ IncisionPath trachea_incision_path(const Centerline& cl, const SurfaceIndex& wal
   if (out.end_arc_mm > cum.back())
     throw InputError(ExitCode::mesh_input,
                      "the incision (rings " + std::to_string(out.first_ring) + "–" + std::to_string(out.last_ring) +
-                         ", to " + fmt(out.end_arc_mm, "%.1f") + " mm) runs beyond the trachea centreline (" +
-                         fmt(cum.back(), "%.1f") + " mm)",
+                         ", to " + format_fixed(out.end_arc_mm, 1) + " mm) runs beyond the trachea centreline (" +
+                         format_fixed(cum.back(), 1) + " mm)",
                      {}, "choose fewer rings or an earlier first ring");
   const Eigen::Vector3d ant = o.anterior_lps.normalized();
   Polyline hits;
@@ -448,7 +443,7 @@ IncisionPath trachea_incision_path(const Centerline& cl, const SurfaceIndex& wal
     const auto h = wall.first_hit(c + far_mm * a, -a, far_mm);
     if (!h || h->surface != 0)
       throw InputError(ExitCode::mesh_input,
-                       "the anterior ray at " + fmt(s, "%.1f") + " mm along the centreline misses the trachea wall", {},
+                       "the anterior ray at " + format_fixed(s, 1) + " mm along the centreline misses the trachea wall", {},
                        "check that the wall surface belongs to this trachea");
     hits.points_lps_mm.push_back(h->point_lps_mm);
   }
@@ -572,8 +567,8 @@ void check_path_within(const Polyline& path, const ImageGrid& g, const fs::path&
       if (x[a] < -margin || x[a] > double(g.size_vox[std::size_t(a)] - 1) + margin) {
         const auto& p = path.points_lps_mm[i];
         throw InputError(ExitCode::unsupported_input,
-                         "point " + std::to_string(i) + " of the path (" + fmt(p.x(), "%.1f") + ", " + fmt(p.y(), "%.1f") +
-                             ", " + fmt(p.z(), "%.1f") + " mm) lies outside the image, far from the body",
+                         "point " + std::to_string(i) + " of the path (" + format_fixed(p.x(), 1) + ", " + format_fixed(p.y(), 1) +
+                             ", " + format_fixed(p.z(), 1) + " mm) lies outside the image, far from the body",
                          source, "paths are in LPS millimetres, the coordinates of the CT (see `organsmith info`)");
       }
     }
@@ -586,10 +581,10 @@ std::string path_json(const Polyline& path, const std::vector<std::pair<std::str
   std::vector<double> s = path.arc_length_mm();
   std::string j = "{\n  \"name\": " + nlohmann::json(path.name).dump() + ",\n  \"coordinates\": \"LPS mm\",\n";
   j += "  \"closed\": " + std::string(path.closed ? "true" : "false") + ",\n";
-  j += "  \"length_mm\": " + fmt(path.length_mm()) + ",\n  \"point_count\": " + std::to_string(p.size()) + ",\n";
+  j += "  \"length_mm\": " + format_fixed(path.length_mm(), 4) + ",\n  \"point_count\": " + std::to_string(p.size()) + ",\n";
   j += "  \"properties\": {";
   for (std::size_t i = 0; i < properties.size(); ++i)
-    j += (i ? ", " : "") + nlohmann::json(properties[i].first).dump() + ": " + fmt(properties[i].second, "%.6g");
+    j += (i ? ", " : "") + nlohmann::json(properties[i].first).dump() + ": " + format_g(properties[i].second, 6);
   j += "},\n";
   if (!notes.empty()) {
     j += "  \"notes\": {";
@@ -599,9 +594,9 @@ std::string path_json(const Polyline& path, const std::vector<std::pair<std::str
   }
   j += "  \"points_lps_mm\": [";
   for (std::size_t i = 0; i < p.size(); ++i)
-    j += std::string(i ? ",\n    " : "\n    ") + "[" + fmt(p[i].x()) + ", " + fmt(p[i].y()) + ", " + fmt(p[i].z()) + "]";
+    j += std::string(i ? ",\n    " : "\n    ") + "[" + format_fixed(p[i].x(), 4) + ", " + format_fixed(p[i].y(), 4) + ", " + format_fixed(p[i].z(), 4) + "]";
   j += "\n  ],\n  \"arc_length_mm\": [";
-  for (std::size_t i = 0; i < s.size(); ++i) j += (i ? ", " : "") + fmt(s[i]);
+  for (std::size_t i = 0; i < s.size(); ++i) j += (i ? ", " : "") + format_fixed(s[i], 4);
   j += "]\n}\n";
   return j;
 }
@@ -615,10 +610,10 @@ std::string path_vtp(const Polyline& path) {
                   std::to_string(p.size()) + "\" NumberOfVerts=\"0\" NumberOfLines=\"" + (p.empty() ? "0" : "1") +
                   "\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">\n";
   v += "      <PointData Scalars=\"arc_length_mm\">\n        <DataArray type=\"Float64\" Name=\"arc_length_mm\" format=\"ascii\">\n";
-  for (double x : s) v += "          " + fmt(x) + "\n";
+  for (double x : s) v += "          " + format_fixed(x, 4) + "\n";
   v += "        </DataArray>\n      </PointData>\n";
   v += "      <Points>\n        <DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n";
-  for (const auto& q : p) v += "          " + fmt(q.x()) + " " + fmt(q.y()) + " " + fmt(q.z()) + "\n";
+  for (const auto& q : p) v += "          " + format_fixed(q.x(), 4) + " " + format_fixed(q.y(), 4) + " " + format_fixed(q.z(), 4) + "\n";
   v += "        </DataArray>\n      </Points>\n";
   v += "      <Lines>\n        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n";
   std::size_t n = 0;

@@ -1,6 +1,7 @@
 // Over 400 lines: the genetic algorithm, the Levenberg–Marquardt polish and the calibration CSV
 // reader (with its line and column errors) of one calibration.
 #include "physics/materials/calibration.h"
+#include "core/csv.h"
 #include "core/file_io.h"
 #include "core/format.h"
 
@@ -9,7 +10,6 @@
 
 #include <algorithm>
 #include <cctype>
-#include <charconv>
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -22,30 +22,6 @@ namespace organsmith::physics {
 namespace {
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
-
-std::string trim(std::string_view s) {
-  const auto b = s.find_first_not_of(" \t\r\n");
-  if (b == std::string_view::npos) return {};
-  const auto e = s.find_last_not_of(" \t\r\n");
-  return std::string(s.substr(b, e - b + 1));
-}
-
-std::string lower(std::string s) {
-  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
-  return s;
-}
-
-std::vector<std::string> split_commas(const std::string& line) {
-  std::vector<std::string> out;
-  std::size_t start = 0;
-  while (true) {
-    const auto comma = line.find(',', start);
-    out.push_back(trim(std::string_view(line).substr(start, comma - start)));
-    if (comma == std::string::npos) break;
-    start = comma + 1;
-  }
-  return out;
-}
 
 std::string where(const std::filesystem::path& source, std::size_t line, const std::string& column) {
   return source.string() + ":" + std::to_string(line) + ", column '" + column + "'";
@@ -61,20 +37,13 @@ CalibrationData parse_calibration_csv(const std::string& text, const std::filesy
                                       bool displacement, std::size_t min_points) {
   CalibrationData d;
   d.source = source;
-  std::istringstream in(text);
-  std::string line;
-  std::size_t line_no = 0;
-  std::vector<std::string> header;
-  while (header.empty() && std::getline(in, line)) {
-    ++line_no;
-    const std::string t = trim(line);
-    if (t.empty() || t[0] == '#') continue;
-    for (auto& h : split_commas(t)) header.push_back(lower(h));
-  }
-  if (header.empty())
+  std::vector<CsvRow> rows = parse_csv_rows(text, source, ExitCode::calibration_data);
+  if (rows.empty())
     throw CalibrationDataError("the file has no header line", source,
                                displacement ? "expected columns displacement_m,force_n"
                                             : "expected columns stretch,stress_pa[,direction,specimen]");
+  lowercase_fields(rows.front());
+  const std::vector<std::string>& header = rows.front().fields;
   auto column = [&](std::string_view name) -> int {
     for (std::size_t i = 0; i < header.size(); ++i)
       if (header[i] == name) return static_cast<int>(i);
@@ -106,13 +75,14 @@ CalibrationData parse_calibration_csv(const std::string& text, const std::filesy
   const int cspec = column("specimen");
   const int clat = displacement ? -1 : column("lateral_stretch");
 
+  std::size_t line_no = 0;
   auto number = [&](const std::vector<std::string>& f, int col, const std::string& name) {
     const std::string& s = f[static_cast<std::size_t>(col)];
-    double v = 0;
-    const auto r = std::from_chars(s.data(), s.data() + s.size(), v);
-    if (s.empty() || r.ec != std::errc() || r.ptr != s.data() + s.size())
+    const std::optional<double> parsed = csv_number(s);
+    if (!parsed)
       throw CalibrationDataError(where(source, line_no, name) + ": '" + s + "' is not a number",
                                  source, "every data cell must be a plain decimal number");
+    const double v = *parsed;
     if (!std::isfinite(v))
       throw CalibrationDataError(where(source, line_no, name) + ": '" + s + "' is not finite",
                                  source, "remove or repair rows with NaN or infinite values");
@@ -121,11 +91,9 @@ CalibrationData parse_calibration_csv(const std::string& text, const std::filesy
 
   // Last x per (specimen, direction) for the monotonicity check.
   std::map<std::pair<std::string, int>, std::pair<double, std::size_t>> last;
-  while (std::getline(in, line)) {
-    ++line_no;
-    const std::string t = trim(line);
-    if (t.empty() || t[0] == '#') continue;
-    const auto f = split_commas(t);
+  for (std::size_t r = 1; r < rows.size(); ++r) {
+    line_no = static_cast<std::size_t>(rows[r].line);
+    const std::vector<std::string>& f = rows[r].fields;
     if (f.size() != header.size())
       throw CalibrationDataError(source.string() + ":" + std::to_string(line_no) + ": " +
                                      std::to_string(f.size()) + " fields, the header has " +
@@ -145,7 +113,8 @@ CalibrationData parse_calibration_csv(const std::string& text, const std::filesy
         throw CalibrationDataError(where(source, line_no, x_name) + ": stretch " + fmt(x) +
                                        " is not positive", source,
                                    "stretch is current/original length (strain = stretch − 1)");
-      std::string dir = cdir >= 0 ? lower(f[static_cast<std::size_t>(cdir)]) : "circumferential";
+      std::string dir = cdir >= 0 ? f[static_cast<std::size_t>(cdir)] : "circumferential";
+      for (char& ch : dir) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
       bool circ;
       if (dir == "circumferential" || dir == "circ" || dir.empty()) circ = true;
       else if (dir == "longitudinal" || dir == "long" || dir == "axial") circ = false;

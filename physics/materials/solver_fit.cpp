@@ -2,7 +2,9 @@
 
 #include "physics/materials/solver_fit.h"
 
+#include "core/csv.h"
 #include "core/errors.h"
+#include "core/file_io.h"
 #include "core/format.h"
 #include "physics/materials/calibration.h"
 
@@ -273,17 +275,14 @@ RegionLaw region_law_from_calibration(const fs::path& path) {
   } else {
     // Older results: the range of the measured points in fit.csv beside it.
     const fs::path fit = path.parent_path() / "fit.csv";
-    std::ifstream f(fit);
-    if (!f) throw bad("no stretch_range and no fit.csv beside it to take the calibrated range from");
-    std::string line;
-    std::getline(f, line);
+    const std::optional<std::string> text = read_file(fit);
+    if (!text) throw bad("no stretch_range and no fit.csv beside it to take the calibrated range from");
+    const CsvTable table = parse_csv(*text, fit, ExitCode::calibration_data);
+    const int cx = table.column("stretch");
+    if (cx < 0) throw bad("fit.csv beside it has no stretch column to take the calibrated range from");
     double top = 0;
-    while (std::getline(f, line)) {
-      std::stringstream ss(line);
-      std::string cell;
-      for (int c = 0; c < 3 && std::getline(ss, cell, ','); ++c)
-        if (c == 2) top = std::max(top, std::strtod(cell.c_str(), nullptr));
-    }
+    for (const CsvRow& row : table.rows)
+      if (const auto x = csv_number(row.fields[std::size_t(cx)]); x && std::isfinite(*x)) top = std::max(top, *x);
     r.stretch_max = top;
     r.range_source = "largest stretch in " + fit.filename().string();
   }

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+
 using namespace organsmith;
 
 TEST(Csv, ReadsQuotedFieldsCommentsAndLineNumbers) {
@@ -51,4 +53,23 @@ TEST(Csv, WriterQuotesOnlyWhatNeedsIt) {
   EXPECT_EQ(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
   const CsvTable t = parse_csv("x,y\n" + csv_field("a,\"b\"\nc") + ",2\n", "", ExitCode::case_file);
   EXPECT_EQ(t.rows.at(0).fields[0], "a,\"b\"\nc");  // the reader gives back what the writer wrote
+}
+
+TEST(Csv, RowsKeepTheirLengthAndNumbersAreWholeFields) {
+  // The row reader leaves ragged rows to its caller (the calibration reader words its own error).
+  const auto rows = parse_csv_rows("a,b,c\n\n1,2\n# note\n3,4,5,6\n", "r.csv", ExitCode::case_file);
+  ASSERT_EQ(rows.size(), 3u);
+  EXPECT_EQ(rows[1].fields.size(), 2u);
+  EXPECT_EQ(rows[1].line, 3);
+  EXPECT_EQ(rows[2].fields.size(), 4u);
+  EXPECT_EQ(rows[2].line, 5);
+  EXPECT_EQ(csv_number("1.25").value_or(0), 1.25);
+  EXPECT_EQ(csv_number("+2e3").value_or(0), 2000.0);
+  EXPECT_EQ(csv_number("-0.5").value_or(0), -0.5);
+  EXPECT_TRUE(std::isnan(csv_number("nan").value_or(0)));  // parsed: finiteness is the caller's check
+  for (const char* bad : {"", "1.5abc", "abc", "1,5", "0x10", "++1", "1 2"})
+    EXPECT_FALSE(csv_number(bad).has_value()) << bad;
+  CsvRow header{1, {"Stretch", "STRESS_Pa"}};
+  lowercase_fields(header);
+  EXPECT_EQ(header.fields, (std::vector<std::string>{"stretch", "stress_pa"}));
 }

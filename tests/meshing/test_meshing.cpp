@@ -12,7 +12,7 @@
 #include "meshing/tet_improve.h"
 #include "pipeline/image_io.h"
 #include "pipeline/phantom.h"
-#include "../pipeline/test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

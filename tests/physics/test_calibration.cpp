@@ -64,6 +64,15 @@ TEST(PhysicsCsv, ReadsStretchStrainDirectionAndSpecimen) {
   EXPECT_EQ(d.specimen[3], "B");
 }
 
+TEST(PhysicsCsv, QuotedSpecimenNamesKeepTheirCommas) {
+  // One CSV reader for the project: quoted fields (RFC 4180) hold commas, as fit.csv writes them.
+  const auto d = parse_calibration_csv(
+      "specimen,stretch,stress_pa\n\"GB 3, fundus\",1.1,10\n\"GB 3, fundus\",1.2,30\nB,1.05,4\n", "q.csv", false, 3);
+  ASSERT_EQ(d.points.size(), 3u);
+  EXPECT_EQ(d.specimen[0], "GB 3, fundus");
+  EXPECT_EQ(d.specimen[2], "B");
+}
+
 TEST(PhysicsCsv, RejectsBadDataWithFileLineAndColumn) {
   std::string m = csv_error("stretch,stress_pa\n1.1,10\n1.2,nan\n1.3,40\n", [](auto&) {});
   EXPECT_NE(m.find("curves.csv:3, column 'stress_pa'"), std::string::npos) << m;

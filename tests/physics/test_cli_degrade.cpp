@@ -1,6 +1,6 @@
 // `organsmith degrade` as a user runs it: files, byte-identical reruns, τ_D fit, exit codes.
 
-#include "../pipeline/test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

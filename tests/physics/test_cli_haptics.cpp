@@ -1,7 +1,7 @@
 // `organsmith guide` and `organsmith haptics` as a user runs them, on a small phantom run:
 // the paths it writes, a replayed trajectory in each mode, and bad input.
 
-#include "../pipeline/test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -3,7 +3,7 @@
 #include "physics/materials/calibration.h"
 #include "physics/materials/models.h"
 
-#include "../pipeline/test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -9,7 +9,7 @@
 #include "physics/haptics/paths.h"
 #include "pipeline/image_io.h"
 #include "tests/physics/synthetic_meshes.h"
-#include "tests/pipeline/test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 

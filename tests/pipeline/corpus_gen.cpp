@@ -5,7 +5,7 @@
 #include "core/progress.h"
 #include "core/volume.h"
 #include "pipeline/dicom.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gdcmDataElement.h>
 #include <gdcmReader.h>

@@ -2,7 +2,7 @@
 // traps (volumes are in corpus_gen.cpp).
 #include "corpus_gen.h"
 
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <cmath>
 #include <fstream>

@@ -5,7 +5,7 @@
 #include "core/sha256.h"
 #include "pipeline/dicom.h"
 #include "pipeline/image_io.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -2,7 +2,7 @@
 // `snapshot DIR` leave the same files, byte for byte, as `organsmith run` of the same case.
 
 #include "core/sha256.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

@@ -1,7 +1,7 @@
 // Cohorts (`organsmith cohort`): validation of the cohort file, the local pool and a real Slurm
 // cluster giving the same studies byte for byte, a broken study that stops nothing, reuse on a
 // rerun, a study killed mid-run, and no input path in anything a cohort shows.
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include "core/csv.h"
 

@@ -8,7 +8,7 @@
 // prints its tally (the figures reported for the issue).
 
 #include "corpus_gen.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

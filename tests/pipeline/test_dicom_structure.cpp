@@ -6,7 +6,7 @@
 #include "core/progress.h"
 #include "pipeline/dicom_structure.h"
 #include "pipeline/ingest.h"
-#include "tests/pipeline/test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 #include <zlib.h>

@@ -5,7 +5,7 @@
 #include "pipeline/dicom.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gdcmImageWriter.h>
 #include <gdcmReader.h>

@@ -3,7 +3,7 @@
 
 #include "core/errors.h"
 #include "pipeline/image_io.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 

@@ -4,7 +4,7 @@
 #include "core/errors.h"
 #include "pipeline/case_file.h"
 #include "pipeline/organ_registry.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 #include "viewer/image.h"
 
 #include <gtest/gtest.h>

@@ -5,7 +5,7 @@
 #include "core/errors.h"
 #include "core/sha256.h"
 #include "pipeline/output_dir.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

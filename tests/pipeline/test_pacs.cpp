@@ -2,7 +2,7 @@
 // GDCM plugins, started on loopback with a temporary configuration (tests/pipeline/orthanc_server.sh)
 // and stopped by PID, also when a test fails.
 #include "pacs/client.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 

@@ -9,7 +9,7 @@
 #include "physics/materials/solver_fit.h"
 #include "pipeline/simulate.h"
 
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 

@@ -7,7 +7,7 @@
 #include "physics/materials/solver_fit.h"
 #include "pipeline/organ_registry.h"
 
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>
 

@@ -1,6 +1,6 @@
 // `organsmith segment` as a user runs it: outputs, exit codes, nothing written on bad input.
 
-#include "../pipeline/test_support.h"
+#include "tests/support/test_support.h"
 #include "core/errors.h"
 #include "pipeline/image_io.h"
 

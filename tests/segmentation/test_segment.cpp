@@ -1,7 +1,7 @@
 // Segmentation stage on the phantom and on real CT: accuracy (Dice, volume error) against the
 // ground truth / references, robustness to the seed position, bad input, determinism.
 
-#include "../pipeline/test_support.h"
+#include "tests/support/test_support.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
 #include "pipeline/phantom.h"

@@ -6,7 +6,7 @@
 // segmentation/README.md is this test's output. Variants still short of the target are listed
 // in kShortOfTarget with what they reach.
 
-#include "../pipeline/test_support.h"
+#include "tests/support/test_support.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
 #include "pipeline/phantom.h"

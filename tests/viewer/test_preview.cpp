@@ -3,7 +3,7 @@
 
 #include <gtest/gtest.h>  // before Xlib, whose None/True/False macros collide with gtest
 
-#include "test_support.h"
+#include "tests/support/test_support.h"
 #include "viewer/display.h"
 #include "viewer/image.h"
 #include "viewer_fixture.h"

@@ -2,7 +2,7 @@
 // organ's colour, and is byte-identical across two runs.
 
 #include "core/progress.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 #include "viewer/display.h"
 #include "viewer/label_surface.h"
 #include "viewer/snapshot.h"

@@ -4,7 +4,7 @@
 
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
-#include "test_support.h"
+#include "tests/support/test_support.h"
 #include "viewer/label_surface.h"
 
 #include <Eigen/Geometry>

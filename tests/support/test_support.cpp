@@ -1,4 +1,4 @@
-#include "test_support.h"
+#include "tests/support/test_support.h"
 
 #include "core/file_io.h"
 #include "core/sha256.h"
