@@ -24,6 +24,7 @@
 #include "pipeline/output_dir.h"
 #include "pipeline/output_layout.h"
 #include "pipeline/output_scene.h"
+#include "pipeline/run_model.h"
 #include "viewer/snapshot.h"
 #include "segmentation/segment.h"
 
@@ -89,13 +90,6 @@ nlohmann::json grid_json(const ImageGrid& g) {
           {"origin_lps_mm", {g.origin_lps_mm.x(), g.origin_lps_mm.y(), g.origin_lps_mm.z()}},
           {"direction_lps_columns", dir}};
 }
-
-/// An organ's seed as the ingest stage resolved it (ingest.json "organs").
-struct OrganSeed {
-  std::string organ;
-  std::optional<Eigen::Vector3d> lps_mm;
-  std::string source;  ///< "case file (LPS mm)", "phantom seeds.json", "automatic", …
-};
 
 /// ingest.json's "organs": the writer of the seeds …
 nlohmann::json ingest_seeds_json(const std::vector<OrganSeed>& seeds, const ImageGrid& grid) {
@@ -293,7 +287,7 @@ class Runner {
     fs::create_directories(staged.meshes_dir());
     export_meshes(meshes, staged.meshes_dir(), ex, &warnings);
     for (const auto& w : warnings) spdlog::warn("mesh: {}", w);
-    meshes_ = std::move(meshes);
+    model_.meshes = std::move(meshes);
   }
 
   /// simulate runs every organ's exported load case (meshes/<organ>/<organ>.inp) in CalculiX and
@@ -347,8 +341,8 @@ class Runner {
 
   /// The segmentation: this run's, else read from labels.nii.gz (its reader).
   const LabelMap& segmentation() {
-    if (!labels_) labels_ = read_label_map(layout_.labels());
-    return *labels_;
+    if (!model_.labels) model_.labels = read_label_map(layout_.labels());
+    return *model_.labels;
   }
 
   /// guide: the guidance paths from this run's label map and surfaces (in memory), else from the
@@ -357,10 +351,10 @@ class Runner {
     std::optional<GuideFiles> files;
     std::optional<LabelMap> truth;
     GuideInputs in;
-    if (labels_ && meshes_) {
-      in.labels = &*labels_;
+    if (model_.labels && model_.meshes) {
+      in.labels = &*model_.labels;
       in.surface = [this](const std::string& organ, const std::string& name) {
-        for (const auto& o : meshes_->organs)
+        for (const auto& o : model_.meshes->organs)
           if (o.spec.name == organ)
             for (const auto& s : o.surfaces)
               if (s.name == name) return s.mesh;
@@ -384,9 +378,9 @@ class Runner {
     flags.registry = &case_.registry;
     flags.case_name = case_.name;
     for (const auto& o : case_.organs) flags.organs.push_back(o.name);
-    if (volume_) flags.ct_volume = &*volume_;  // this run's, in memory (else read again)
-    if (labels_) flags.label_map = &*labels_;
-    if (meshes_ && !case_.stages.mesh.ras) flags.meshes = &*meshes_;
+    if (model_.ct) flags.ct_volume = &*model_.ct;  // this run's, in memory (else read again)
+    if (model_.labels) flags.label_map = &*model_.labels;
+    if (model_.meshes && !case_.stages.mesh.ras) flags.meshes = &*model_.meshes;
     OutputScene os;
     load_output_scene(out_, flags, os, progress_);
     for (const auto& m : os.missing) spdlog::info("snapshot: not found: {}", m);
@@ -410,11 +404,11 @@ class Runner {
 
   /// The ingested volume: kept from the ingest stage, or read again when that stage was reused.
   const Volume& volume() {
-    if (!volume_) {
+    if (!model_.ct) {
       spdlog::info("reading the input again for the stages that need it");
-      volume_ = ingest(input_, case_.ingest, progress_).volume;
+      model_.ct = ingest(input_, case_.ingest, progress_).volume;
     }
-    return *volume_;
+    return *model_.ct;
   }
 
   /// Digest of the files a stage of this run produced (or reused): what later stages depend on.
@@ -468,7 +462,7 @@ class Runner {
     }
     fs::create_directories(staged.overlays_dir());
     write_overlays(volume(), result, staged.overlays_dir());
-    labels_ = std::move(result.labels);
+    model_.labels = std::move(result.labels);
   }
 
   const OrganSpec* case_organ(const std::string& name) const {
@@ -504,11 +498,11 @@ class Runner {
         j["other_series"].push_back({{"series_uid", s.series_uid}, {"modality", s.modality}, {"files", s.files}});
     }
     j["warnings"] = r.report.warnings;
-    seeds_ = resolve_seeds(r.volume.grid);
-    j["organs"] = ingest_seeds_json(*seeds_, r.volume.grid);
+    model_.seeds = resolve_seeds(r.volume.grid);
+    j["organs"] = ingest_seeds_json(*model_.seeds, r.volume.grid);
     input_json_ = {{"format", j["format"]}, {"digest_sha256", input_digest_}, {"grid", j["grid"]}};
     write_text_atomic(OutputLayout{staging}.ingest(), j.dump(2) + "\n");
-    volume_ = std::move(r.volume);
+    model_.ct = std::move(r.volume);
   }
 
   /// Each organ's seed in LPS mm (case file, else the phantom's seeds.json) and where it came from.
@@ -536,8 +530,8 @@ class Runner {
 
   /// The organ seeds: this run's ingest stage's, else read back from its ingest.json.
   const std::vector<OrganSeed>& organ_seeds() {
-    if (!seeds_) seeds_ = read_ingest_seeds(layout_.ingest());
-    return *seeds_;
+    if (!model_.seeds) model_.seeds = read_ingest_seeds(layout_.ingest());
+    return *model_.seeds;
   }
 
   /// The case's own organ registry, when it has one (empty otherwise: the embedded registry is
@@ -632,12 +626,7 @@ class Runner {
   std::vector<StageRecord> records_;
   std::string input_digest_;
   fs::path input_;
-  // What the stages of this run made, handed on in memory; a stage reused from an earlier run
-  // leaves them empty and the next stage reads its files instead (their readers).
-  std::optional<Volume> volume_;
-  std::optional<LabelMap> labels_;
-  std::optional<OrganMeshes> meshes_;
-  std::optional<std::vector<OrganSeed>> seeds_;
+  RunModel model_;  // what the stages of this run made, handed on in memory
   bool done_ = false;     // set once the --until stage has run
   bool started_ = false;  // set at the --from stage
   nlohmann::json input_json_ = nlohmann::json::object();

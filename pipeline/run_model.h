@@ -1,0 +1,32 @@
+#pragma once
+// The model a run builds stage by stage in memory (DESIGN: "Model"): each stage takes what the
+// stages before it made from here and adds its own part. A stage reused from an earlier run
+// leaves its part empty, and the stage after it reads that stage's files through their readers
+// (resume and the single-stage commands); no stage reads another's files while they are here.
+
+#include "core/volume.h"
+#include "meshing/mesh.h"
+
+#include <Eigen/Core>
+
+#include <optional>
+#include <string>
+#include <vector>
+
+namespace organsmith {
+
+/// An organ's seed as the ingest stage resolved it (ingest.json "organs").
+struct OrganSeed {
+  std::string organ;
+  std::optional<Eigen::Vector3d> lps_mm;  ///< none: found automatically or taken from a label map
+  std::string source;                     ///< "case file (LPS mm)", "phantom seeds.json", "automatic", …
+};
+
+struct RunModel {
+  std::optional<Volume> ct;                     ///< ingest: the CT in HU on its grid (LPS mm)
+  std::optional<std::vector<OrganSeed>> seeds;  ///< ingest: one per organ of the case, in case order
+  std::optional<LabelMap> labels;               ///< segment: every organ's label on the CT's grid
+  std::optional<OrganMeshes> meshes;            ///< mesh: per organ, surfaces and tetrahedra with regions (LPS mm)
+};
+
+}  // namespace organsmith
