@@ -6,6 +6,7 @@
 #include "meshing/export_text.h"
 
 #include "core/file_io.h"
+#include "core/vtk_xml.h"
 
 #include "core/errors.h"
 
@@ -99,24 +100,13 @@ void write_ply(const SurfaceMesh& m, const fs::path& path, bool ras) {
 
 
 void write_vtp(const SurfaceMesh& m, const fs::path& path, bool ras) {
-  std::string s = "<?xml version=\"1.0\"?>\n<!-- organsmith surface, " + std::string(ras ? "RAS" : "LPS") +
-                  " mm -->\n<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
-                  "  <PolyData>\n    <Piece NumberOfPoints=\"" + std::to_string(m.vertices_lps_mm.size()) +
-                  "\" NumberOfVerts=\"0\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"" +
-                  std::to_string(m.triangles.size()) + "\">\n";
-  s += vtk_points(m.vertices_lps_mm, ras);
-  s += "      <Polys>\n        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n";
-  for (const auto& t : m.triangles) s += "          " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " + std::to_string(t[2]) + "\n";
-  s += "        </DataArray>\n        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n";
-  for (std::size_t i = 0; i < m.triangles.size(); ++i) s += "          " + std::to_string(3 * (i + 1)) + "\n";
-  s += "        </DataArray>\n      </Polys>\n";
-  if (!m.region_ids.empty()) {
-    s += "      <CellData Scalars=\"region_id\">\n        <DataArray type=\"Int32\" Name=\"region_id\" format=\"ascii\">\n";
-    for (auto r : m.region_ids) s += "          " + std::to_string(r) + "\n";
-    s += "        </DataArray>\n      </CellData>\n";
-  }
-  s += "    </Piece>\n  </PolyData>\n</VTKFile>\n";
-  write_atomic(path, s);
+  VtkPiece piece;
+  piece.points.reserve(m.vertices_lps_mm.size());
+  for (const auto& v : m.vertices_lps_mm) piece.points.push_back(out_point(v, ras));
+  for (const auto& t : m.triangles) piece.add_cell(t);
+  if (!m.region_ids.empty())
+    piece.cell_data.push_back({"region_id", "Int32", 1, std::vector<double>(m.region_ids.begin(), m.region_ids.end())});
+  write_atomic(path, vtk_polydata_xml(piece, VtkPolyCells::polys, std::string("organsmith surface, ") + (ras ? "RAS" : "LPS") + " mm"));
 }
 
 std::string quality_json(const OrganMesh& organ) {

@@ -9,6 +9,7 @@
 
 #include "core/errors.h"
 #include "core/format.h"
+#include "core/vtk_xml.h"
 
 #include <Eigen/Geometry>
 
@@ -16,6 +17,7 @@
 #include <cmath>
 #include <map>
 #include <set>
+#include <span>
 
 namespace organsmith {
 namespace fs = std::filesystem;
@@ -93,43 +95,15 @@ std::vector<std::int32_t> inactive_only_nodes(const SolverModel& m, const std::v
 
 void write_vtu(const SolverModel& m, const fs::path& path, bool ras, const std::vector<PointField>& point_fields) {
   const int npe = m.nodes_per_element();
-  std::string s = "<?xml version=\"1.0\"?>\n<!-- organsmith tetrahedra (" + std::string(m.quadratic ? "quadratic" : "linear") +
-                  "), " + std::string(ras ? "RAS" : "LPS") +
-                  " mm; region_id per cell -->\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
-                  "  <UnstructuredGrid>\n    <Piece NumberOfPoints=\"" + std::to_string(m.nodes_lps_mm.size()) +
-                  "\" NumberOfCells=\"" + std::to_string(m.elements.size()) + "\">\n";
-  s += vtk_points(m.nodes_lps_mm, ras);
-  s += "      <Cells>\n        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n";
-  for (const auto& e : m.elements) {
-    s += "         ";
-    for (int k = 0; k < npe; ++k) s += " " + std::to_string(e[k]);  // VTK's quadratic tetra uses the same order
-    s += "\n";
-  }
-  s += "        </DataArray>\n        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n";
-  for (std::size_t i = 0; i < m.elements.size(); ++i) s += "          " + std::to_string(npe * (i + 1)) + "\n";
-  s += "        </DataArray>\n        <DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n";
-  const std::string type = m.quadratic ? "          24\n" : "          10\n";  // VTK_QUADRATIC_TETRA, VTK_TETRA
-  for (std::size_t i = 0; i < m.elements.size(); ++i) s += type;
-  s += "        </DataArray>\n      </Cells>\n      <CellData Scalars=\"region_id\">\n"
-       "        <DataArray type=\"Int32\" Name=\"region_id\" format=\"ascii\">\n";
-  for (auto r : m.region_ids) s += "          " + std::to_string(r) + "\n";
-  s += "        </DataArray>\n      </CellData>\n";
-  if (!point_fields.empty()) {
-    s += "      <PointData>\n";
-    for (const auto& f : point_fields) {
-      s += "        <DataArray type=\"Float64\" Name=\"" + xml_escape(f.name) + "\" NumberOfComponents=\"" +
-           std::to_string(f.components) + "\" format=\"ascii\">\n";
-      for (std::size_t i = 0; i < f.values.size(); i += std::size_t(f.components)) {
-        s += "         ";
-        for (int k = 0; k < f.components; ++k) s += " " + num(f.values[i + std::size_t(k)]);
-        s += "\n";
-      }
-      s += "        </DataArray>\n";
-    }
-    s += "      </PointData>\n";
-  }
-  s += "    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n";
-  write_atomic(path, s);
+  VtkPiece piece;
+  piece.points.reserve(m.nodes_lps_mm.size());
+  for (const auto& v : m.nodes_lps_mm) piece.points.push_back(out_point(v, ras));
+  for (const auto& e : m.elements) piece.add_cell(std::span(e.data(), std::size_t(npe)));  // VTK's quadratic tetra uses the same order
+  piece.cell_types.assign(m.elements.size(), m.quadratic ? 24 : 10);  // VTK_QUADRATIC_TETRA, VTK_TETRA
+  piece.cell_data.push_back({"region_id", "Int32", 1, std::vector<double>(m.region_ids.begin(), m.region_ids.end())});
+  for (const auto& f : point_fields) piece.point_data.push_back({f.name, "Float64", f.components, f.values});
+  write_atomic(path, vtk_unstructured_xml(piece, std::string("organsmith tetrahedra (") + (m.quadratic ? "quadratic" : "linear") +
+                                                     "), " + (ras ? "RAS" : "LPS") + " mm; region_id per cell"));
 }
 
 namespace {

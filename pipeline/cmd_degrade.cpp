@@ -7,6 +7,7 @@
 
 #include "core/errors.h"
 #include "core/format.h"
+#include "core/vtk_xml.h"
 #include "physics/materials/calibration.h"
 #include "physics/degradation/clip.h"
 #include "physics/degradation/degradation.h"
@@ -60,50 +61,31 @@ struct DegradeFlags {
 std::string stage_vtp(const ClipModel& m, const ClipSnapshot* s, const std::string& title) {
   const ClipGeometry& g = m.geometry();
   const int N = g.elements(), P = g.nodes();
-  std::ostringstream x;
-  x << "<?xml version=\"1.0\"?>\n"
-    << "<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n"
-    << "  <PolyData>\n"
-    << "    <FieldData>\n"
-    << "      <DataArray type=\"Float64\" Name=\"t_days\" NumberOfTuples=\"1\" format=\"ascii\">"
-    << num(s ? s->t_days : 0.0) << "</DataArray>\n"
-    << "      <DataArray type=\"Int32\" Name=\"load_carried\" NumberOfTuples=\"1\" format=\"ascii\">"
-    << (s && s->load_carried ? 1 : 0) << "</DataArray>\n"
-    << "    </FieldData>\n"
-    << "    <Piece NumberOfPoints=\"" << P << "\" NumberOfVerts=\"0\" NumberOfLines=\"" << N
-    << "\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">\n"
-    << "      <Points>\n        <DataArray type=\"Float64\" Name=\"points_mm\" NumberOfComponents=\"3\" format=\"ascii\">\n";
+  VtkPiece piece;
+  piece.field_data.push_back({"t_days", "Float64", 1, {s ? s->t_days : 0.0}});
+  piece.field_data.push_back({"load_carried", "Int32", 1, {s && s->load_carried ? 1.0 : 0.0}});
+  VtkArray displacement{"displacement_mm", "Float64", 3, {}};
   for (int n = 0; n < P; ++n) {
     const Eigen::Vector2d p = s ? Eigen::Vector2d(s->q.segment<2>(2 * n)) : g.nodes_mm[n];
-    x << "          " << num(p.x()) << ' ' << num(p.y()) << " 0\n";
+    piece.points.emplace_back(p.x(), p.y(), 0.0);
+    const Eigen::Vector2d u = p - g.nodes_mm[n];
+    displacement.values.insert(displacement.values.end(), {u.x(), u.y(), 0.0});
   }
-  x << "        </DataArray>\n      </Points>\n      <PointData>\n"
-    << "        <DataArray type=\"Float64\" Name=\"displacement_mm\" NumberOfComponents=\"3\" format=\"ascii\">\n";
-  for (int n = 0; n < P; ++n) {
-    const Eigen::Vector2d u = s ? Eigen::Vector2d(s->q.segment<2>(2 * n) - g.nodes_mm[n]) : Eigen::Vector2d::Zero();
-    x << "          " << num(u.x()) << ' ' << num(u.y()) << " 0\n";
-  }
-  x << "        </DataArray>\n      </PointData>\n      <CellData Scalars=\"d\">\n";
+  piece.point_data.push_back(std::move(displacement));
   auto cell_array = [&](const char* type, const char* name, auto value) {
-    x << "        <DataArray type=\"" << type << "\" Name=\"" << name << "\" format=\"ascii\">\n          ";
-    for (int e = 0; e < N; ++e) x << value(e) << (e + 1 < N ? ((e + 1) % 10 ? " " : "\n          ") : "\n");
-    x << "        </DataArray>\n";
+    VtkArray a{name, type, 1, {}};
+    for (int e = 0; e < N; ++e) a.values.push_back(value(e));
+    piece.cell_data.push_back(std::move(a));
   };
-  cell_array("Float64", "d", [&](int e) { return num(s ? s->d[e] : 0.0); });
-  cell_array("Float64", "remaining", [&](int e) { return num(s ? 1.0 - s->d[e] : 1.0); });
-  cell_array("Float64", "E_star", [&](int e) { return num(s ? s->energies.density[e] : 0.0); });
-  cell_array("Float64", "E_star_mJ", [&](int e) { return num(s ? s->energies.e_star_mJ[e] : 0.0); });
-  cell_array("Int32", "fractured", [&](int e) { return std::to_string(s && s->fractured[e] ? 1 : 0); });
-  cell_array("Int32", "region", [&](int e) { return std::to_string(static_cast<int>(g.region[e])); });
-  cell_array("Int32", "element_id", [&](int e) { return std::to_string(e); });
-  x << "      </CellData>\n      <Lines>\n"
-    << "        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n";
-  for (int e = 0; e < N; ++e) x << "          " << e << ' ' << e + 1 << "\n";
-  x << "        </DataArray>\n        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n";
-  for (int e = 0; e < N; ++e) x << "          " << 2 * (e + 1) << "\n";
-  x << "        </DataArray>\n      </Lines>\n    </Piece>\n  </PolyData>\n"
-    << "  <!-- " << title << " -->\n</VTKFile>\n";
-  return x.str();
+  cell_array("Float64", "d", [&](int e) { return s ? s->d[e] : 0.0; });
+  cell_array("Float64", "remaining", [&](int e) { return s ? 1.0 - s->d[e] : 1.0; });
+  cell_array("Float64", "E_star", [&](int e) { return s ? s->energies.density[e] : 0.0; });
+  cell_array("Float64", "E_star_mJ", [&](int e) { return s ? s->energies.e_star_mJ[e] : 0.0; });
+  cell_array("Int32", "fractured", [&](int e) { return s && s->fractured[e] ? 1.0 : 0.0; });
+  cell_array("Int32", "region", [&](int e) { return double(static_cast<int>(g.region[e])); });
+  cell_array("Int32", "element_id", [&](int e) { return double(e); });
+  for (int e = 0; e < N; ++e) piece.add_cell(std::array<int, 2>{e, e + 1});
+  return vtk_polydata_xml(piece, VtkPolyCells::lines, title);
 }
 
 /// The clip's centroid curve in a state as plot lines: one series per run of intact elements

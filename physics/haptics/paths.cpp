@@ -6,6 +6,7 @@
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/format.h"
+#include "core/vtk_xml.h"
 #include "physics/haptics/contact.h"
 
 #include <Eigen/Eigenvalues>
@@ -603,26 +604,17 @@ std::string path_json(const Polyline& path, const std::vector<std::pair<std::str
 
 std::string path_vtp(const Polyline& path) {
   const auto& p = path.points_lps_mm;
-  const std::vector<double> s = path.arc_length_mm();
-  std::string v = "<?xml version=\"1.0\"?>\n<!-- organsmith guidance path '" + path.name +
-                  "', LPS mm -->\n<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" "
-                  "header_type=\"UInt64\">\n  <PolyData>\n    <Piece NumberOfPoints=\"" +
-                  std::to_string(p.size()) + "\" NumberOfVerts=\"0\" NumberOfLines=\"" + (p.empty() ? "0" : "1") +
-                  "\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">\n";
-  v += "      <PointData Scalars=\"arc_length_mm\">\n        <DataArray type=\"Float64\" Name=\"arc_length_mm\" format=\"ascii\">\n";
-  for (double x : s) v += "          " + format_fixed(x, 4) + "\n";
-  v += "        </DataArray>\n      </PointData>\n";
-  v += "      <Points>\n        <DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n";
-  for (const auto& q : p) v += "          " + format_fixed(q.x(), 4) + " " + format_fixed(q.y(), 4) + " " + format_fixed(q.z(), 4) + "\n";
-  v += "        </DataArray>\n      </Points>\n";
-  v += "      <Lines>\n        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n";
-  std::size_t n = 0;
-  for (std::size_t i = 0; i < p.size(); ++i, ++n) v += "          " + std::to_string(i) + "\n";
-  if (path.closed && p.size() > 2) v += "          0\n", ++n;
-  v += "        </DataArray>\n        <DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n";
-  if (!p.empty()) v += "          " + std::to_string(n) + "\n";
-  v += "        </DataArray>\n      </Lines>\n    </Piece>\n  </PolyData>\n</VTKFile>\n";
-  return v;
+  VtkPiece piece;
+  piece.points = p;
+  piece.point_decimals = 4;  // 0.1 µm: far below the 1 mm sampling
+  if (!p.empty()) {
+    std::vector<std::int64_t> ids(p.size());
+    for (std::size_t i = 0; i < p.size(); ++i) ids[i] = std::int64_t(i);
+    if (path.closed && p.size() > 2) ids.push_back(0);
+    piece.add_cell(ids);
+  }
+  piece.point_data.push_back({"arc_length_mm", "Float64", 1, path.arc_length_mm(), 4});
+  return vtk_polydata_xml(piece, VtkPolyCells::lines, "organsmith guidance path '" + path.name + "', LPS mm");
 }
 
 }  // namespace organsmith::physics
