@@ -28,11 +28,6 @@ namespace organsmith {
 
 using namespace meshing_detail;
 
-std::vector<MeshOrganSpec> default_organs() {
-  return {{"gallbladder", std::uint8_t(Label::gallbladder), OrganModel::wall_body, 2.0},
-          {"trachea", std::uint8_t(Label::trachea), OrganModel::tube, 2.5}};
-}
-
 MeshQualityError::MeshQualityError(std::string message, std::string hint)
     : Error(ExitCode::mesh_quality, std::move(message), {}, std::move(hint)) {}
 
@@ -615,6 +610,8 @@ OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Prog
     throw InputError(ExitCode::mesh_input, "the label map is empty (no voxels)", {}, "pass a segmented label map");
   if (options.edge_mm <= 0 || !std::isfinite(options.edge_mm))
     throw UsageError("the target edge length must be positive (got " + fmt(options.edge_mm) + " mm)");
+  if (options.organs.empty())
+    throw UsageError("no organ to mesh", "name the organs (label, mesh model, wall) from the organ registry");
   OrganMeshes result;
   std::vector<MeshOrganSpec> present;
   for (const auto& spec : options.organs) {

@@ -38,12 +38,11 @@ struct MeshOrganSpec {
   double wall_mm = 0.0;  ///< wall thickness for wall_body and tube (mm); ignored for solid
 };
 
-/// The default organs: gallbladder (label 1, 2 mm wall) and trachea (label 2, 2.5 mm wall).
-std::vector<MeshOrganSpec> default_organs();
-
 /// Options of `mesh_organs`.
 struct MeshOptions {
-  std::vector<MeshOrganSpec> organs = default_organs();
+  /// The organs to mesh. Meshing knows no organ by itself: the pipeline takes them from the organ
+  /// registry (data/organs.toml, `mesh_spec`).
+  std::vector<MeshOrganSpec> organs;
   double edge_mm = 1.5;              ///< target surface edge length (mm), default 1.5
   double smoothing_sigma_vox = 0.6;  ///< Gaussian σ of the mask before iso-surfacing, in voxels of each axis
   double max_smoothing_sigma_mm = 1.5;  ///< cap on σ along thick-slice axes (mm)

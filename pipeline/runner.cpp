@@ -250,7 +250,6 @@ class Runner {
     const LabelMap& labels = segmentation();
     const MeshStageOptions& mo = case_.stages.mesh;
     MeshOptions options;
-    options.organs.clear();
     for (const auto& o : case_.organs) options.organs.push_back(mesh_spec(case_.registry.at(o.name), mo.wall_mm));
     options.edge_mm = mo.edge_mm;
     options.tetrahedra = mo.tetrahedra;

@@ -11,6 +11,7 @@
 #include "meshing/detail.h"
 #include "meshing/tet_improve.h"
 #include "pipeline/image_io.h"
+#include "pipeline/organ_registry.h"
 #include "pipeline/phantom.h"
 #include "tests/support/test_support.h"
 
@@ -29,6 +30,13 @@ namespace fs = std::filesystem;
 using organsmith::testing::ScratchDir;
 
 namespace {
+
+/// The organs as the pipeline meshes them: from the built-in organ registry (data/organs.toml).
+std::vector<MeshOrganSpec> registry_organs(std::initializer_list<const char*> names = {"gallbladder", "trachea"}) {
+  std::vector<MeshOrganSpec> specs;
+  for (const char* n : names) specs.push_back(mesh_spec(builtin_organ_registry().at(n)));
+  return specs;
+}
 
 /// Independent of CGAL: every undirected edge is used by exactly two triangles, in opposite
 /// directions (closed, edge-manifold and consistently oriented).
@@ -104,6 +112,7 @@ class PhantomMeshes : public ::testing::Test {
     const Phantom ph = synthesize_phantom(PhantomOptions{}, progress);
     labels_ = new LabelMap(ph.truth);
     MeshOptions o;
+    o.organs = registry_organs();
     o.enforce_quality = false;
     meshes_ = new OrganMeshes(mesh_organs(*labels_, o, progress));
   }
@@ -496,6 +505,7 @@ TEST(MeshingDeterminism, SameInputGivesByteIdenticalExports) {
         if (k >= 5 && k <= 34 && tx * tx + ty * ty < 16) lm.labels[lm.grid.offset(i, j, k)] = 2;
       }
   MeshOptions o;
+  o.organs = registry_organs();
   o.enforce_quality = false;
   NullProgress progress;
   ScratchDir a("meshing-det-a"), b("meshing-det-b");
@@ -517,7 +527,7 @@ TEST(MeshingRealData, GallbladderReferenceMeetsEveryGuarantee) {
   ORGANSMITH_REQUIRE_REAL_DATA();
   const LabelMap lm = read_label_map(organsmith::testing::real_data_dir() / "abdomen-ct-3mm" / "gallbladder-reference.nii.gz");
   MeshOptions o;
-  o.organs = {default_organs()[0]};
+  o.organs = registry_organs({"gallbladder"});
   o.enforce_quality = false;
   NullProgress progress;
   const OrganMeshes m = mesh_organs(lm, o, progress);
@@ -530,7 +540,7 @@ TEST(MeshingRealData, TracheaReferenceMeetsEveryGuarantee) {
   ORGANSMITH_REQUIRE_REAL_DATA();
   const LabelMap lm = read_label_map(organsmith::testing::real_data_dir() / "chest-dicom-8mm" / "trachea-reference.nii.gz");
   MeshOptions o;
-  MeshOrganSpec trachea = default_organs()[1];
+  MeshOrganSpec trachea = registry_organs({"trachea"})[0];
   trachea.label = 1;  // the reference stores the lumen as 1
   o.organs = {trachea};
   o.enforce_quality = false;
@@ -547,6 +557,9 @@ TEST(MeshingBadInput, ClearErrorsNamingTheOrgan) {
   lm.grid.size_vox = {20, 20, 20};
   lm.labels.assign(8000, 0);
   MeshOptions o;
+  // No organ asked for: meshing knows none by itself.
+  EXPECT_THROW(mesh_organs(lm, o, progress), UsageError);
+  o.organs = registry_organs();
   // Empty: no organ present.
   try {
     mesh_organs(lm, o, progress);
@@ -556,7 +569,7 @@ TEST(MeshingBadInput, ClearErrorsNamingTheOrgan) {
   }
   // One voxel.
   lm.labels[lm.grid.offset(10, 10, 10)] = 1;
-  o.organs = {default_organs()[0]};
+  o.organs = registry_organs({"gallbladder"});
   try {
     mesh_organs(lm, o, progress);
     FAIL() << "expected an error";
@@ -565,7 +578,7 @@ TEST(MeshingBadInput, ClearErrorsNamingTheOrgan) {
     EXPECT_NE(std::string(e.what()).find("gallbladder"), std::string::npos) << e.what();
   }
   // Organ absent, when asked not to skip.
-  o.organs = default_organs();
+  o.organs = registry_organs();
   o.skip_absent = false;
   try {
     mesh_organs(lm, o, progress);
@@ -576,7 +589,7 @@ TEST(MeshingBadInput, ClearErrorsNamingTheOrgan) {
   }
   // Empty grid.
   LabelMap none;
-  EXPECT_THROW(mesh_organs(none, MeshOptions{}, progress), Error);
+  EXPECT_THROW(mesh_organs(none, o, progress), Error);
 }
 
 TEST(MeshingBadInput, LabelTouchingTheBorderIsCappedWithAWarning) {

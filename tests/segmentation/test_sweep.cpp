@@ -9,6 +9,7 @@
 #include "tests/support/test_support.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
+#include "pipeline/organ_registry.h"
 #include "pipeline/phantom.h"
 #include "scan_variants.h"
 #include "meshing/mesh.h"
@@ -242,9 +243,7 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
   if (seeded) req.seed_lps_mm = s.seed_lps_mm;
   const SegmentationResult seg = segment_organs(s.ct, {req}, {}, np);
   MeshOptions mo;
-  mo.organs.clear();
-  for (const auto& spec : default_organs())
-    if (spec.name == organ) mo.organs.push_back(spec);
+  mo.organs = {mesh_spec(builtin_organ_registry().at(organ))};
   mo.enforce_quality = false;
   MeshRow row;
   const auto t0 = std::chrono::steady_clock::now();
