@@ -77,8 +77,11 @@ class Scu final : public DcmSCU {
                                  Uint16& status) override {
     go_on = OFTrue;
     status = STATUS_Success;
-    if (!incoming || !store) return EC_Normal;
-    DcmFileFormat file(incoming);  // copies; the caller deletes `incoming`
+    if (!incoming) return EC_Normal;
+    // DcmSCU hands the received data set over: this handler owns it and must free it (each one
+    // holds a whole instance's pixels). The file object takes it without a copy.
+    DcmFileFormat file(incoming, OFFalse);
+    if (!store) return EC_Normal;
     const E_TransferSyntax xfer = incoming->getOriginalXfer();
     file.transferInit();
     const Uint32 length = file.calcElementLength(xfer, EET_ExplicitLength) + 1024;

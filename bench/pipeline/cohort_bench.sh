@@ -2,7 +2,7 @@
 # Cohort engines against the reference a user would write: a shell loop over `organsmith run`.
 # One run measures, on the same 8 small phantom studies (64² × 40 slices, gallbladder and
 # trachea, phantom seeds 1–3 and 5–9; at 64² seed 4's gallbladder is too small to find): wall time of the loop, of `cohort --engine local` and of
-# `cohort --engine slurm` (a private one-node Slurm, tests/pipeline/slurm_cluster.sh), the
+# `cohort --engine slurm` (a private one-node Slurm, tests/support/slurm_cluster.sh), the
 # engine's overhead per study (wall time × parallel studies − the studies' own run times, ÷ N),
 # and peak memory (the engine process itself, and the largest study).
 #   bash bench/pipeline/cohort_bench.sh [BUILD_DIR]      (make bench runs it)
@@ -12,7 +12,7 @@ exe=$(realpath "${1:-$here/build}")/pipeline/organsmith
 [ -x "$exe" ] || { echo "cohort_bench: build first ($exe missing)" >&2; exit 1; }
 work=$(mktemp -d /tmp/osm-cbench-XXXXXX)
 cluster=$work/cluster
-cleanup() { "$here/tests/pipeline/slurm_cluster.sh" stop "$cluster" >/dev/null 2>&1 || true; rm -rf "$work"; }
+cleanup() { "$here/tests/support/slurm_cluster.sh" stop "$cluster" >/dev/null 2>&1 || true; rm -rf "$work"; }
 trap cleanup EXIT
 N=8
 printf '[case]\ninput = "phantom"\n[phantom]\nsize = 64\nslice_mm = 10\n[[organ]]\nname = "gallbladder"\n[[organ]]\nname = "trachea"\n' > "$work/shared.toml"
@@ -39,7 +39,7 @@ run_engine() {  # engine out_dir → wall seconds
   echo "$(now) - $t0" | bc
 }
 local_s=$(run_engine local "$work/local")
-"$here/tests/pipeline/slurm_cluster.sh" start "$cluster" > /dev/null
+"$here/tests/support/slurm_cluster.sh" start "$cluster" > /dev/null
 export SLURM_CONF=$cluster/slurm.conf
 slurm_s=$(run_engine slurm "$work/slurm")
 

@@ -1,7 +1,7 @@
 #!/bin/bash
 # PACS pulls against reading the same series from disk, in one run: the 30-slice chest series
 # (../shared/data/real/chest-dicom-8mm) is put into a private Orthanc on loopback
-# (tests/pipeline/orthanc_server.sh), then pulled into an empty cache by DICOMweb and by DIMSE
+# (tests/support/orthanc_server.sh), then pulled into an empty cache by DICOMweb and by DIMSE
 # C-GET (best of 3 each) and read from disk by `organsmith run --until ingest` (the reference).
 # Prints MB/s of each and the pull's overhead in seconds over the disk read.
 #   bash bench/pipeline/pull_bench.sh [BUILD_DIR]      (make bench runs it)
@@ -12,8 +12,8 @@ series=$here/../shared/data/real/chest-dicom-8mm/dicom
 [ -x "$exe" ] || { echo "pull_bench: build first ($exe missing)" >&2; exit 1; }
 [ -d "$series" ] || { echo "pull_bench: $series is absent (../shared/data/real)" >&2; exit 1; }
 work=$(mktemp -d /tmp/osm-pbench-XXXXXX)
-trap '"$here/tests/pipeline/orthanc_server.sh" stop "$work/orthanc" > /dev/null 2>&1 || true; rm -rf "$work"' EXIT
-read -r http dicom < <("$here/tests/pipeline/orthanc_server.sh" start "$work/orthanc" bench bench-pw)
+trap '"$here/tests/support/orthanc_server.sh" stop "$work/orthanc" > /dev/null 2>&1 || true; rm -rf "$work"' EXIT
+read -r http dicom < <("$here/tests/support/orthanc_server.sh" start "$work/orthanc" bench bench-pw)
 for f in "$series"/*; do curl -s -f -o /dev/null -u bench:bench-pw -X POST --data-binary @"$f" "http://127.0.0.1:$http/instances"; done
 study=$(dcmdump -s +P 0020,000d "$(ls "$series"/* | head -1)" | sed -n 's/.*\[\(.*\)\].*/\1/p')
 export ORGANSMITH_PACS_USER=bench ORGANSMITH_PACS_PASSWORD=bench-pw

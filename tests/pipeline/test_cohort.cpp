@@ -62,7 +62,7 @@ void expect_complete(const fs::path& study) {
   EXPECT_FALSE(has_staging_leftover(study)) << study;
 }
 
-/// A private one-node Slurm cluster (tests/pipeline/slurm_cluster.sh), stopped by PID when the
+/// A private one-node Slurm cluster (tests/support/slurm_cluster.sh), stopped by PID when the
 /// object dies, also when the test fails.
 class SlurmCluster {
  public:
@@ -70,7 +70,7 @@ class SlurmCluster {
     char dir[] = "/tmp/osm-slurm-XXXXXX";  // short: Slurm's socket paths live under it
     if (!mkdtemp(dir)) return;
     dir_ = dir;
-    const std::string script = std::string(ORGANSMITH_SOURCE_DIR) + "/tests/pipeline/slurm_cluster.sh";
+    const std::string script = std::string(ORGANSMITH_SOURCE_DIR) + "/tests/support/slurm_cluster.sh";
     const std::string cmd = "'" + script + "' start '" + dir_.string() + "' > '" + dir_.string() + "/start.log' 2>&1";
     const int rc = std::system(cmd.c_str());
     start_log_ = read_file(dir_ / "start.log");
@@ -83,7 +83,7 @@ class SlurmCluster {
   }
   ~SlurmCluster() {
     if (dir_.empty()) return;
-    const std::string script = std::string(ORGANSMITH_SOURCE_DIR) + "/tests/pipeline/slurm_cluster.sh";
+    const std::string script = std::string(ORGANSMITH_SOURCE_DIR) + "/tests/support/slurm_cluster.sh";
     (void)std::system(("'" + script + "' stop '" + dir_.string() + "' > /dev/null 2>&1").c_str());
     unsetenv("SLURM_CONF");
     std::error_code ec;

@@ -1,5 +1,5 @@
 // `organsmith pull` and pacs:// inputs against a real PACS: Debian's Orthanc with its DICOMweb and
-// GDCM plugins, started on loopback with a temporary configuration (tests/pipeline/orthanc_server.sh)
+// GDCM plugins, started on loopback with a temporary configuration (tests/support/orthanc_server.sh)
 // and stopped by PID, also when a test fails.
 #include "pacs/client.h"
 #include "tests/support/test_support.h"
@@ -25,7 +25,7 @@ namespace {
 constexpr const char* kUser = "radiology";
 constexpr const char* kPassword = "s3cret-pw";
 
-std::string script() { return std::string(ORGANSMITH_SOURCE_DIR) + "/tests/pipeline/orthanc_server.sh"; }
+std::string script() { return std::string(ORGANSMITH_SOURCE_DIR) + "/tests/support/orthanc_server.sh"; }
 
 class Orthanc {
  public:
