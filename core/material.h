@@ -25,6 +25,18 @@ struct Material {
   std::optional<double> parameter(const std::string& name) const;
 };
 
+/// FEBio's "Fung-ortho-compressible" form of a membrane Fung law (thesis 5.1.3), for solvers that
+/// take the law itself: W = c/2 (e^Q − 1) + k/2 (ln J)², Q = c⁻¹ Σ [2μa Aa:E² + Σ λab (Aa:E)(Ab:E)]
+/// with the λ, μ of the orthotropic moduli below. Material axes: 1 = longitudinal, 2 =
+/// circumferential, 3 = wall normal (given per element). Moduli in Pa.
+struct FebioFungOrthotropic {
+  double E1_Pa = 0, E2_Pa = 0, E3_Pa = 0;
+  double G12_Pa = 0, G23_Pa = 0, G31_Pa = 0;
+  double v12 = 0, v23 = 0, v31 = 0;
+  double c_Pa = 0, k_Pa = 0;
+  std::string note;  ///< the mapping and what it leaves to assumption
+};
+
 /// A calibrated law in the form finite-element solvers take, fitted to the law's own response
 /// (physics/materials/solver_fit.h). Ogden in the Abaqus/CalculiX convention
 ///   W = Σ 2μi/αi² (λ̄1^αi + λ̄2^αi + λ̄3^αi − 3) + (J − 1)²/D1,  D1 = 2/K,
@@ -40,6 +52,9 @@ struct SolverMaterial {
   double max_relative_error = 0.0;  ///< largest |fit − law|/|law| over the fitted curves
   std::string curves;            ///< which responses were fitted ("uniaxial circumferential, …")
   std::string note;              ///< one line of provenance for file comments
+  /// The law itself in FEBio's Fung orthotropic form, for membrane Fung laws (fung-wall); FEB
+  /// files use it with per-element material axes, other formats the Ogden fit.
+  std::optional<FebioFungOrthotropic> febio_fung;
 };
 
 }  // namespace organsmith

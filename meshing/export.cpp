@@ -175,6 +175,15 @@ std::vector<fs::path> export_meshes(const OrganMeshes& meshes, const fs::path& d
       if (want.count("msh")) emit(n + ".msh", [&](const fs::path& p) { write_msh41(v, p, o.ras); });
       if (want.count("msh22")) emit(n + ".v22.msh", [&](const fs::path& p) { write_msh22(v, p, o.ras); });
       if (want.count("inp")) emit(n + ".inp", [&](const fs::path& p) { write_inp(v, o.materials, sc, p, o.ras, warnings); });
+      if (want.count("inp") && !o.material_band.empty()) {
+        fs::create_directories(dir / rel / "band", ec);
+        if (ec) throw OutputError("cannot create the output directory", dir / rel / "band", ec.message());
+        for (const auto& [variant, regions] : o.material_band) {
+          std::map<std::string, SolverMaterial> mats = o.materials;
+          for (const auto& [region, m] : regions) mats[region] = m;
+          emit("band/" + n + "." + variant + ".inp", [&](const fs::path& p) { write_inp(v, mats, sc, p, o.ras); });
+        }
+      }
       if (want.count("feb")) emit(n + ".feb", [&](const fs::path& p) { write_feb(v, o.materials, sc, p, o.ras); });
     }
     emit("quality.json", [&](const fs::path& p) { write_atomic(p, quality_json(organ)); });

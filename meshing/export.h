@@ -31,6 +31,10 @@ struct ExportOptions {
   /// (physics/materials/solver_fit.h); stresses in MPa in the files (meshes are in mm). A region
   /// without an entry gets a documented placeholder and a warning.
   std::map<std::string, SolverMaterial> materials;
+  /// Material band: variant name ("p05", "p50", "p95") → solver material per region. Each variant
+  /// gets its own INP, `<organ>/band/<organ>.<variant>.inp`, the same model and load step with
+  /// that variant's materials (regions it does not name keep `materials`). Empty: none.
+  std::map<std::string, std::map<std::string, SolverMaterial>> material_band;
   /// Load case per organ name; organs without an entry get default_scenario(spec).
   std::map<std::string, SolverScenario> scenarios;
   /// How boundary surfaces are found (liver bed direction, liver label distance).
@@ -39,7 +43,8 @@ struct ExportOptions {
 
 /// Writes every organ into `dir/<organ>/`: one file per surface and format
 /// (`<surface>.stl`, …), one per volume format (`<organ>.vtu`, `<organ>.msh`,
-/// `<organ>.v22.msh`, `<organ>.inp`, `<organ>.feb`; the solver files with named sets,
+/// `<organ>.v22.msh`, `<organ>.inp`, `<organ>.feb`, and `band/<organ>.<variant>.inp` with a
+/// material band; the solver files with named sets,
 /// surfaces and the organ's load step) and `quality.json` with every quality figure. Returns the files written, relative to `dir`, in a fixed order; `warnings`
 /// receives what the user should know (placeholder materials). Throws OutputError.
 std::vector<std::filesystem::path> export_meshes(const OrganMeshes& meshes, const std::filesystem::path& dir,

@@ -5,6 +5,7 @@
 // mid-edge nodes after the corners, and the sets and surfaces carry the same names everywhere.
 
 #include "meshing/export.h"
+#include "meshing/material_axes.h"
 #include "meshing/export_text.h"
 
 #include "core/errors.h"
@@ -360,6 +361,11 @@ void write_feb(const SolverModel& m, const std::map<std::string, SolverMaterial>
        "      <qn_method type=\"BFGS\">\n        <max_ups>10</max_ups>\n      </qn_method>\n    </solver>\n"
        "    <time_stepper type=\"default\">\n      <dtmin>1e-05</dtmin>\n      <dtmax>0.25</dtmax>\n"
        "      <max_retries>10</max_retries>\n      <opt_iter>10</opt_iter>\n    </time_stepper>\n  </Control>\n";
+  // Regions whose law FEBio takes as it is (membrane Fung laws) get per-element material axes.
+  std::map<std::string, std::vector<MaterialAxes>> axes;
+  for (const auto& [id, name] : regions)
+    if (const auto it = materials.find(name); it != materials.end() && it->second.febio_fung)
+      if (auto a = wall_material_axes(m, id); !a.empty()) axes[name] = std::move(a);
   s += "  <Material>\n";
   int mid = 0;
   for (const auto& [id, name] : regions) {
@@ -371,6 +377,20 @@ void write_feb(const SolverModel& m, const std::map<std::string, SolverMaterial>
       continue;
     }
     const SolverMaterial& sm = it->second;
+    if (sm.febio_fung && axes.count(name)) {
+      // The law itself (no fit): FEBio's Fung orthotropic form with per-element axes (MeshData).
+      const FebioFungOrthotropic& f = *sm.febio_fung;
+      s += "    <!-- " + xml_escape(sm.law_id) + ": " + xml_escape(f.note) + ". Axes per element in MeshData. -->\n";
+      s += "    <material id=\"" + std::to_string(++mid) + "\" name=\"" + xml_escape(name) + "\" type=\"Fung-ortho-compressible\">\n";
+      s += "      <density>1e-09</density>\n";
+      const std::pair<const char*, double> params[] = {
+          {"E1", mpa(f.E1_Pa)},   {"E2", mpa(f.E2_Pa)},   {"E3", mpa(f.E3_Pa)}, {"G12", mpa(f.G12_Pa)},
+          {"G23", mpa(f.G23_Pa)}, {"G31", mpa(f.G31_Pa)}, {"v12", f.v12},       {"v23", f.v23},
+          {"v31", f.v31},         {"c", mpa(f.c_Pa)},     {"k", mpa(f.k_Pa)}};
+      for (const auto& [key, v] : params) s += "      <" + std::string(key) + ">" + num(v) + "</" + key + ">\n";
+      s += "    </material>\n";
+      continue;
+    }
     s += "    <!-- " + xml_escape(sm.note) + "; bulk modulus " + num(sm.bulk_modulus_Pa) + " Pa: " + xml_escape(sm.bulk_source) +
          ". FEBio's Ogden: c_i = 2 mu_i, m_i = alpha_i, k = K (pressure_model 2: U = k/2 (J-1)^2). -->\n";
     s += "    <material id=\"" + std::to_string(++mid) + "\" name=\"" + xml_escape(name) + "\" type=\"Ogden\">\n";
@@ -423,6 +443,23 @@ void write_feb(const SolverModel& m, const std::map<std::string, SolverMaterial>
     s += "    <SolidDomain name=\"" + xml_escape(name) + "\" mat=\"" + xml_escape(name) + "\"/>\n";
   }
   s += "  </MeshDomains>\n";
+  if (!axes.empty()) {
+    // After MeshDomains (FEBio refuses it before). a = longitudinal, d = circumferential; FEBio
+    // takes e1 = a, e3 = a × d (the wall normal), e2 = e3 × e1.
+    s += "  <MeshData>\n";
+    for (const auto& [name, list] : axes) {
+      s += "    <ElementData type=\"mat_axis\" elem_set=\"" + xml_escape(name) + "\">\n";
+      auto vec = [&](const Eigen::Vector3d& v) {
+        const Eigen::Vector3d o = out_point(v, ras);
+        return format_g(o.x(), 6) + "," + format_g(o.y(), 6) + "," + format_g(o.z(), 6);
+      };
+      for (std::size_t i = 0; i < list.size(); ++i)
+        s += "      <e lid=\"" + std::to_string(i + 1) + "\"><a>" + vec(list[i].longitudinal) + "</a><d>" +
+             vec(list[i].circumferential) + "</d></e>\n";
+      s += "    </ElementData>\n";
+    }
+    s += "  </MeshData>\n";
+  }
   if (!sc.fixed_nodes.empty()) {
     s += "  <Boundary>\n    <bc name=\"fixed\" type=\"zero displacement\" node_set=\"" + xml_escape(sc.fixed_nodes) +
          "\">\n      <x_dof>1</x_dof>\n      <y_dof>1</y_dof>\n      <z_dof>1</z_dof>\n    </bc>\n  </Boundary>\n";

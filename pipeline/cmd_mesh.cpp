@@ -35,6 +35,7 @@ struct MeshFlags {
   std::vector<std::string> organs;  // NAME or NAME=LABEL
   double gallbladder_wall_mm = 0.0, trachea_wall_mm = 0.0;  // 0 = the organ registry's
   bool no_tets = false, allow_failures = false;
+  bool material_band = false;
 };
 
 std::vector<std::string> split(const std::string& s, char sep) {
@@ -95,6 +96,7 @@ int continue_run(const MeshFlags& f) {
   if (!f.formats.empty()) m.formats = split(f.formats, ',');
   if (f.ras) m.ras = true;
   if (f.no_tets) m.tetrahedra = false;
+  if (f.material_band) m.material_band = true;
   if (f.gallbladder_wall_mm > 0) m.wall_mm["gallbladder"] = f.gallbladder_wall_mm;
   if (f.trachea_wall_mm > 0) m.wall_mm["trachea"] = f.trachea_wall_mm;
   m.quality_gate = f.allow_failures ? "report" : "enforce";
@@ -130,6 +132,12 @@ int run_mesh(const MeshFlags& f) {
   if (!f.formats.empty()) eo.formats = split(f.formats, ',');
   eo.ras = f.ras;
   eo.materials = region_materials(builtin_organ_registry());
+  if (f.material_band) {
+    std::vector<std::string> names;
+    for (const auto& spec : options.organs)
+      if (builtin_organ_registry().find(spec.name)) names.push_back(spec.name);
+    eo.material_band = region_band_materials(builtin_organ_registry(), names);
+  }
   {  // reject unknown formats before spending time on meshing
     const auto known = all_mesh_formats();
     for (const auto& x : eo.formats)
@@ -197,6 +205,9 @@ std::vector<Command> meshing_commands(CLI::App& app) {
   sub->add_option("--trachea-wall-mm", flags->trachea_wall_mm, "trachea wall thickness in mm (default: the organ registry's, 2.5)")
       ->check(CLI::PositiveNumber);
   sub->add_flag("--no-tets", flags->no_tets, "surfaces only (no tetrahedral meshes)");
+  sub->add_flag("--material-band", flags->material_band,
+                "also write each organ's INP with the P5/P50/P95 variants of its materials, from the spread of\n"
+                "their calibration (meshes/<organ>/band/<organ>.p05.inp, …; `simulate --band` runs them)");
   sub->add_flag("--allow-quality-failures", flags->allow_failures,
                 "write the meshes even when a quality guarantee fails (quality.json says which)");
   return {Command{sub, [flags] { return run_mesh(*flags); }}};

@@ -24,6 +24,7 @@ struct SimulateArgs {
   std::string solver = "ccx";
   int threads = -1;
   double timeout_s = -1;
+  bool band = false;
 };
 
 int cmd_simulate(const SimulateArgs& a) {
@@ -41,6 +42,7 @@ int cmd_simulate(const SimulateArgs& a) {
   if (!a.organs.empty()) c->stages.simulate.organs = a.organs;
   if (a.threads >= 0) c->stages.simulate.threads = a.threads;
   if (a.timeout_s >= 0) c->stages.simulate.timeout_s = a.timeout_s;
+  if (a.band) c->stages.simulate.band = true;
   RunOptions ro;
   ro.from = "simulate";
   ro.until = "simulate";
@@ -55,7 +57,14 @@ int cmd_simulate(const SimulateArgs& a) {
     const nlohmann::json r = nlohmann::json::parse(in);
     std::cout << o.name << ": converged in " << r["increments"] << " increments, " << r["max_displacement_mm"]
               << " mm largest displacement, " << r["max_von_mises_Pa"] << " Pa largest von Mises stress, reaction balance "
-              << r["reaction_balance_error"] << "\n  " << j.string() << "\n";
+              << r["reaction_balance_error"] << "\n";
+    if (r.contains("band") && r["band"].contains("max_displacement_mm"))
+      std::cout << "  material band P5–P95: largest displacement " << r["band"]["max_displacement_mm"][0] << "–"
+                << r["band"]["max_displacement_mm"][1] << " mm, lumen volume change "
+                << r["band"]["lumen_volume_change_mm3"][0] << "–" << r["band"]["lumen_volume_change_mm3"][1] << " mm³\n";
+    else if (r.contains("band"))
+      std::cout << "  material band: not every variant converged (see band.variants)\n";
+    std::cout << "  " << j.string() << "\n";
   }
   (void)summary;
   return 0;
@@ -76,6 +85,9 @@ std::vector<Command> simulate_commands(CLI::App& app) {
   cmd->add_option("--organ", a->organs, "organ to simulate (repeatable; default: every organ with a load case)");
   cmd->add_option("--solver", a->solver, "CalculiX executable (default: ccx on PATH, or $ORGANSMITH_CCX)");
   cmd->add_option("--threads", a->threads, "solver threads (default: the case's, 0 = every core)")->check(CLI::Range(0, 1024));
+  cmd->add_flag("--band", a->band,
+                "also run the material band's P5/P50/P95 variants (written by `mesh DIR --material-band` or\n"
+                "[stages.mesh] material_band) and report the largest displacement as a band");
   cmd->add_option("--timeout-s", a->timeout_s, "stop a solver run after this many seconds (default: none)")
       ->check(CLI::Range(0.0, 1.0e6));
   return {{cmd, [a] { return cmd_simulate(*a); }}};

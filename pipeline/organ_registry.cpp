@@ -3,6 +3,7 @@
 #include "core/errors.h"
 #include "core/toml_parse.h"
 #include "physics/materials/presets.h"
+#include "physics/materials/material_band.h"
 #include "physics/materials/solver_fit.h"
 #include "pipeline/stage_options.h"
 #include "segmentation/presets.h"
@@ -299,17 +300,18 @@ const physics::SolverFit& solver_fit_of(const std::string& ref) {
   if (it == cache.end()) it = cache.emplace(ref, physics::fit_solver_material(region_law(ref))).first;
   return it->second;
 }
-}  // namespace
 
-std::map<std::string, SolverMaterial> region_materials(const OrganRegistry& registry) {
-  std::map<std::string, SolverMaterial> out;
-  for (const auto& o : registry.organs)
-    for (const auto& [region, ref] : o.materials) out[region] = solver_fit_of(ref).material;
-  return out;
+/// Bands take ~0.3 s each (2000 draws, three fits); one per material reference and process.
+const physics::MaterialBand& material_band_of(const std::string& ref) {
+  static std::mutex mutex;
+  static std::map<std::string, physics::MaterialBand> cache;
+  std::lock_guard lock(mutex);
+  auto it = cache.find(ref);
+  if (it == cache.end()) it = cache.emplace(ref, physics::material_band(region_law(ref))).first;
+  return it->second;
 }
 
-nlohmann::json solver_material_json(const std::string& ref) {
-  const physics::SolverFit& f = solver_fit_of(ref);
+nlohmann::json fit_json(const physics::SolverFit& f) {
   const SolverMaterial& m = f.material;
   nlohmann::json curves = nlohmann::json::array();
   for (const auto& c : f.curves)
@@ -327,15 +329,46 @@ nlohmann::json solver_material_json(const std::string& ref) {
           {"min_tangent_Pa", f.min_tangent_Pa}};
 }
 
-nlohmann::json uniaxial_curve_json(const std::string& ref) {
-  const physics::SolverFit& f = solver_fit_of(ref);
-  const physics::LawCurve& c = f.curves.front();  // the isotropic or direction-mean uniaxial path
+/// The first (uniaxial or direction-mean) path of a fit's curves as [[stretch, Pa], …] from (1, 0).
+nlohmann::json first_curve_json(const physics::SolverFit& f) {
+  const physics::LawCurve& c = f.curves.front();
   nlohmann::json pts = nlohmann::json::array({{1.0, 0.0}});
   for (std::size_t i = 0; i < c.stretch.size(); ++i) pts.push_back({c.stretch[i], c.nominal_stress_Pa[i]});
   return pts;
 }
+}  // namespace
 
-nlohmann::json materials_json_for(const OrganRegistry& registry, const std::vector<std::string>& organs) {
+std::map<std::string, std::map<std::string, SolverMaterial>> region_band_materials(const OrganRegistry& registry,
+                                                                                    const std::vector<std::string>& organs) {
+  std::map<std::string, std::map<std::string, SolverMaterial>> out;
+  for (const auto& name : organs)
+    for (const auto& [region, ref] : registry.at(name).materials) {
+      const physics::MaterialBand* band = nullptr;
+      try {
+        band = &material_band_of(ref);
+      } catch (const Error& e) {
+        throw Error(e.code(), "region " + region + " of " + name + ": " + e.message(), e.path(),
+                    "give the region a material with a spread in the case ([materials] " + region +
+                        " = …) or leave [stages.mesh] material_band off");
+      }
+      for (const auto& m : band->members) out[m.name][region] = m.fit.material;
+    }
+  return out;
+}
+
+std::map<std::string, SolverMaterial> region_materials(const OrganRegistry& registry) {
+  std::map<std::string, SolverMaterial> out;
+  for (const auto& o : registry.organs)
+    for (const auto& [region, ref] : o.materials) out[region] = solver_fit_of(ref).material;
+  return out;
+}
+
+nlohmann::json solver_material_json(const std::string& ref) { return fit_json(solver_fit_of(ref)); }
+
+// The isotropic or direction-mean uniaxial path.
+nlohmann::json uniaxial_curve_json(const std::string& ref) { return first_curve_json(solver_fit_of(ref)); }
+
+nlohmann::json materials_json_for(const OrganRegistry& registry, const std::vector<std::string>& organs, bool band) {
   nlohmann::json regions = nlohmann::json::object();
   for (const auto& name : organs) {
     for (const auto& [region, ref] : registry.at(name).materials) {
@@ -353,6 +386,18 @@ nlohmann::json materials_json_for(const OrganRegistry& registry, const std::vect
       r["uniaxial_curve_pa"] = uniaxial_curve_json(ref);
       r["uniaxial_curve_path"] = solver_fit_of(ref).curves.front().name;
       r["solver"] = solver_material_json(ref);
+      if (band) {
+        const physics::MaterialBand& b = material_band_of(ref);
+        nlohmann::json members = nlohmann::json::object();
+        for (const auto& m : b.members)
+          members[m.name] = {{"level", m.level}, {"uniaxial_curve_pa", first_curve_json(m.fit)}, {"solver", fit_json(m.fit)}};
+        r["band"] = {{"method", "percentiles of the law's stress over Monte Carlo draws of its parameters (independent "
+                                "normals), each percentile curve fitted like the law (physics/materials/material_band.h)"},
+                     {"spread", b.spread_kind},
+                     {"draws", b.draws},
+                     {"rejected_draws", b.rejected_draws},
+                     {"members", members}};
+      }
       regions[region] = r;
     }
   }

@@ -94,6 +94,12 @@ bool is_calibration_ref(const std::string& ref);
 /// the region's calibrated law (physics/materials/solver_fit.h).
 std::map<std::string, SolverMaterial> region_materials(const OrganRegistry& registry);
 
+/// The P5/P50/P95 variants of every tet region's solver material (physics/materials/
+/// material_band.h), by member name ("p05", …) then region. InputError (exit 21) naming the
+/// region's material when it carries no spread.
+std::map<std::string, std::map<std::string, SolverMaterial>> region_band_materials(const OrganRegistry& registry,
+                                                                                    const std::vector<std::string>& organs);
+
 /// The solver fit of a material reference as JSON (coefficients, range, errors), and the law
 /// itself sampled as a uniaxial nominal-stress curve [[stretch, Pa], …] over its range.
 nlohmann::json solver_material_json(const std::string& ref);
@@ -101,7 +107,8 @@ nlohmann::json uniaxial_curve_json(const std::string& ref);
 
 /// materials.json of the attach stage: per region of `organs`, its preset (or calibration),
 /// model, parameters with units, calibrated range, the law as a uniaxial curve and its solver
-/// fit.
-nlohmann::json materials_json_for(const OrganRegistry& registry, const std::vector<std::string>& organs);
+/// fit; with `band`, the material band (its variants' solver fits and uniaxial curves).
+nlohmann::json materials_json_for(const OrganRegistry& registry, const std::vector<std::string>& organs,
+                                  bool band = false);
 
 }  // namespace organsmith

@@ -35,6 +35,10 @@ struct OutputLayout {
     return organ_dir(organ) / (organ + "." + ext);
   }
   std::filesystem::path quality(const std::string& organ) const { return organ_dir(organ) / "quality.json"; }
+  /// An organ's INP with a material band's variant ("p05", …) on its regions.
+  std::filesystem::path band_input(const std::string& organ, const std::string& variant) const {
+    return organ_dir(organ) / "band" / (organ + "." + variant + ".inp");
+  }
   // attach
   std::filesystem::path materials() const { return root / "materials.json"; }
   // guide

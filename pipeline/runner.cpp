@@ -276,6 +276,11 @@ class Runner {
     ex.ras = mo.ras;
     ex.materials = region_materials(case_.registry);
     ex.quadratic = !mo.linear_tets;
+    if (mo.material_band) {
+      std::vector<std::string> organs;
+      for (const auto& o : case_.organs) organs.push_back(o.name);
+      ex.material_band = region_band_materials(case_.registry, organs);
+    }
     for (const auto& spec : options.organs) {
       SolverScenario sc = default_scenario(spec);
       if (const auto it = mo.pressure_kPa.find(spec.name); it != mo.pressure_kPa.end()) sc.pressure_kPa = it->second;
@@ -327,6 +332,7 @@ class Runner {
       Simulation sim = simulate_inp(inp, work, so, progress_);
       // Keep the solver's account (log, status, printed totals), not its bulky result file.
       for (const char* f : {"job.frd", "job.cvg", "job.12d", "spooles.out"}) fs::remove(work / f);
+      if (case_.stages.simulate.band) sim.result.band = simulate_band(o.name, work, so);
       write_simulation_files(sim.input, sim.frd, sim.result, staged.simulation_dir());
       const auto& r = sim.result;
       spdlog::info("simulate: {}: converged in {} increments, {:.1f} s; largest displacement {:.3g} mm, von Mises "
@@ -336,6 +342,35 @@ class Runner {
       ++ran;
     }
     if (ran == 0) spdlog::warn("simulate: no organ with a load case (gallbladder or trachea) in this case");
+  }
+
+  /// The material band's variants of one organ (meshes/<organ>/band/), each run like the organ's
+  /// own INP in `work`/band_<variant>/. A variant that does not converge is recorded with the
+  /// solver's words and a warning; it does not fail the stage (the organ's own result stands).
+  nlohmann::json simulate_band(const std::string& organ, const fs::path& work, const SimulateOptions& so) {
+    std::map<std::string, SimulationResult> variants;
+    for (const char* v : {"p05", "p50", "p95"}) {
+      const fs::path inp = layout_.band_input(organ, v);
+      if (!fs::exists(inp))
+        throw InputError(ExitCode::input_not_found, organ + ": no material band to simulate", inp,
+                         "write one with [stages.mesh] material_band = true (or `organsmith mesh DIR --material-band`)");
+      const fs::path dir = work / (std::string("band_") + v);
+      try {
+        Simulation sim = simulate_inp(inp, dir, so, progress_);
+        variants[v] = sim.result;
+        spdlog::info("simulate: {} band {}: largest displacement {:.3g} mm, lumen change {:.4g} ml", organ, v,
+                     sim.result.max_displacement_mm, sim.result.lumen_volume_change_mm3 / 1000);
+      } catch (const SimulationError& e) {
+        if (e.code() != ExitCode::solver_failed) throw;
+        SimulationResult failed;
+        failed.organ = organ;
+        failed.solver_message = e.message();
+        variants[v] = failed;
+        spdlog::warn("simulate: {} band {}: {}", organ, v, e.message());
+      }
+      for (const char* f : {"job.frd", "job.cvg", "job.12d", "spooles.out"}) fs::remove(dir / f);
+    }
+    return band_summary(variants);
   }
 
   /// The segmentation: this run's, else read from labels.nii.gz (its reader).
@@ -398,7 +433,7 @@ class Runner {
   nlohmann::json materials_json() const {
     std::vector<std::string> organs;
     for (const auto& o : case_.organs) organs.push_back(o.name);
-    return materials_json_for(case_.registry, organs);
+    return materials_json_for(case_.registry, organs, case_.stages.mesh.material_band);
   }
 
   /// The ingested volume: kept from the ingest stage, or read again when that stage was reused.

@@ -334,7 +334,7 @@ void evaluate_simulation(const SolverInput& in, const FrdResult& frd, Simulation
 }
 
 nlohmann::json SimulationResult::to_json() const {
-  return {{"organ", organ},
+  nlohmann::json j = {{"organ", organ},
           {"solver", "CalculiX ccx"},
           {"converged", converged},
           {"increments", increments},
@@ -350,6 +350,35 @@ nlohmann::json SimulationResult::to_json() const {
           {"lumen_volume_mm3", lumen_volume_mm3},
           {"lumen_volume_change_mm3", lumen_volume_change_mm3},
           {"solver_message", solver_message}};
+  if (!band.is_null()) j["band"] = band;
+  return j;
+}
+
+nlohmann::json band_summary(const std::map<std::string, SimulationResult>& variants) {
+  nlohmann::json runs = nlohmann::json::object();
+  double dmin = INFINITY, dmax = -INFINITY, vmin = INFINITY, vmax = -INFINITY;
+  bool all = !variants.empty();
+  for (const auto& [name, r] : variants) {
+    runs[name] = {{"converged", r.converged},
+                  {"load_factor", r.load_factor},
+                  {"increments", r.increments},
+                  {"solver_seconds", r.solver_seconds},
+                  {"max_displacement_mm", r.max_displacement_mm},
+                  {"max_von_mises_Pa", r.max_von_mises_Pa},
+                  {"lumen_volume_change_mm3", r.lumen_volume_change_mm3},
+                  {"reaction_balance_error", r.balance_error},
+                  {"solver_message", r.solver_message}};
+    all = all && r.converged;
+    if (!r.converged) continue;
+    dmin = std::min(dmin, r.max_displacement_mm), dmax = std::max(dmax, r.max_displacement_mm);
+    vmin = std::min(vmin, r.lumen_volume_change_mm3), vmax = std::max(vmax, r.lumen_volume_change_mm3);
+  }
+  nlohmann::json b = {{"variants", runs}, {"all_converged", all}};
+  if (all) {
+    b["max_displacement_mm"] = {dmin, dmax};
+    b["lumen_volume_change_mm3"] = {vmin, vmax};
+  }
+  return b;
 }
 
 // ---- running the solver --------------------------------------------------------------------------

@@ -15,6 +15,7 @@
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -71,6 +72,8 @@ struct SimulationResult {
   double max_von_mises_Pa = 0.0;
   double lumen_volume_mm3 = 0.0, lumen_volume_change_mm3 = 0.0;
   std::string solver_message;     ///< the solver's own words when it failed
+  /// The material band's runs (see band_summary), null when none were run.
+  nlohmann::json band;
   nlohmann::json to_json() const;
 };
 
@@ -80,6 +83,11 @@ struct Simulation {
   FrdResult frd;
   SimulationResult result;
 };
+
+/// The material band of one organ: each variant's run ("p05" → its result; a variant whose run
+/// failed has converged = false and the solver's message), and the band of the largest
+/// displacement and the lumen volume change over the converged variants.
+nlohmann::json band_summary(const std::map<std::string, SimulationResult>& variants);
 
 /// Runs `inp` in CalculiX inside `work_dir` (created; the solver's files stay there) and reads
 /// the result. Throws SimulationError: exit 70 when the solver is not installed, 71 when it

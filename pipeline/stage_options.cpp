@@ -54,6 +54,8 @@ void visit(Visitor& v, MeshStageOptions& o) {
   v.boolean("linear_tets", o.linear_tets, "linear tetrahedra (C3D4/tet4) instead of quadratic (C3D10/tet10)");
   v.per_organ("pressure_kPa", o.pressure_kPa, 0.0, 100.0, "kPa",
               "lumen pressure of the organ's load step, e.g. { trachea = 1.0 }; {} = gallbladder 1.5, trachea 2.0");
+  v.boolean("material_band", o.material_band,
+            "also write each organ's INP with the P5/P50/P95 variants of its materials (meshes/<organ>/band/)");
 }
 
 void visit(Visitor& v, SimulateStageOptions& o) {
@@ -61,6 +63,7 @@ void visit(Visitor& v, SimulateStageOptions& o) {
   v.subset("organs", o.organs, {"gallbladder", "trachea"}, "organs to simulate; [] = every organ with a load case");
   v.integer("threads", o.threads, 0, 1024, "solver threads; 0 = every core");
   v.number("timeout_s", o.timeout_s, 0.0, 1.0e6, "s", "stop a solver run after this long; 0 = no limit");
+  v.boolean("band", o.band, "also run the material band's variants ([stages.mesh] material_band) and report a band");
 }
 
 void visit(Visitor& v, GuideStageOptions& o) {

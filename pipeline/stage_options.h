@@ -32,6 +32,10 @@ struct MeshStageOptions {
   /// Lumen pressure of an organ's load step in the solver files, kPa, e.g. { trachea = 1.0 }; an
   /// organ not named keeps its default (gallbladder 1.5, trachea 2.0).
   std::map<std::string, double> pressure_kPa;
+  /// Also write each organ's INP with the P5, P50 and P95 variants of its regions' materials
+  /// (meshes/<organ>/band/<organ>.p05.inp, …; physics/materials/material_band.h), and the band in
+  /// materials.json (default false).
+  bool material_band = false;
   MeshStageOptions();
 };
 
@@ -41,6 +45,9 @@ struct SimulateStageOptions {
   std::vector<std::string> organs;  ///< organs to simulate; [] = every organ with a load case (default)
   int threads = 0;        ///< solver threads; 0 = every core (default 0)
   double timeout_s = 0;   ///< stop a solver run after this many seconds; 0 = no limit (default 0)
+  /// Also run the material band's variants ([stages.mesh] material_band) and report the organ's
+  /// largest displacement and lumen volume change as a band (default false).
+  bool band = false;
 };
 
 /// [stages.snapshot]: the review pictures.

@@ -106,6 +106,7 @@ std::vector<LawCurve> law_curves(const RegionLaw& law, int samples) {
     add("uniaxial longitudinal", LoadCase::uniaxial_longitudinal, false);
     LawCurve mean = curves[0];
     mean.name = "uniaxial, mean of both directions";
+    mean.direction_mean = true;
     for (std::size_t i = 0; i < mean.stretch.size(); ++i)
       mean.nominal_stress_Pa[i] = 0.5 * (curves[0].nominal_stress_Pa[i] + curves[1].nominal_stress_Pa[i]);
     add("equibiaxial circumferential", LoadCase::biaxial_circumferential, true);
@@ -119,8 +120,12 @@ std::vector<LawCurve> law_curves(const RegionLaw& law, int samples) {
 }
 
 SolverFit fit_solver_material(const RegionLaw& law, const SolverFitOptions& o) {
+  return fit_solver_curves(law, law_curves(law, o.samples), o);
+}
+
+SolverFit fit_solver_curves(const RegionLaw& law, std::vector<LawCurve> curves, const SolverFitOptions& o) {
   SolverFit out;
-  out.curves = law_curves(law, o.samples);
+  out.curves = std::move(curves);
   // Every path becomes calibration data for the incompressible Ogden model (biaxial rows carry
   // their lateral stretch), with relative residuals so that small and large stretches count alike.
   CalibrationData data;
@@ -216,11 +221,35 @@ SolverFit fit_solver_material(const RegionLaw& law, const SolverFitOptions& o) {
     throw InputError(ExitCode::calibration_data,
                      "material '" + law.id + "': the fitted Ogden solid is not stable over [1, " + format_g(law.stretch_max) + "]",
                      {}, "check the law's parameters; a stable law gives a stable fit");
+  if (law.material.model == "fung-wall") {
+    const auto& p = law.material;
+    const auto c = p.parameter("c"), a1 = p.parameter("a1"), a2 = p.parameter("a2"), a4 = p.parameter("a4");
+    // FEBio needs positive moduli: a positive definite Fung matrix (a1 a2 > a4²) with c > 0.
+    if (c && a1 && a2 && a4 && *c > 0 && *a1 > 0 && *a2 > 0 && *a1 * *a2 > *a4 * *a4)
+      m.febio_fung = febio_fung_form(*c, *a1, *a2, *a4, m.bulk_modulus_Pa);
+  }
   std::ostringstream note;
   note << "Ogden N=3 fitted to " << law.material.model << " (" << law.id << ") over stretch [1, " << format_g(law.stretch_max)
        << "] (" << m.curves << "); largest relative stress error " << format_g(std::round(best_err * 1e4) / 100) << " %";
   m.note = note.str();
   return out;
+}
+
+FebioFungOrthotropic febio_fung_form(double c, double a1, double a2, double a4, double k) {
+  FebioFungOrthotropic f;
+  const double a33 = 1e-3 * std::min(a1, a2);
+  f.E1_Pa = c * (a2 - a4 * a4 / a1);
+  f.E2_Pa = c * (a1 - a4 * a4 / a2);
+  f.E3_Pa = c * a33;
+  f.v12 = a4 / a1;
+  f.G12_Pa = f.G23_Pa = f.G31_Pa = c * std::sqrt(a1 * a2) / 4;
+  f.c_Pa = c;
+  f.k_Pa = k;
+  f.note = "thesis 5.1.3 membrane Fung law as FEBio Fung-ortho-compressible (axes 1 longitudinal, 2 circumferential, "
+           "3 wall normal): E1 = c (a2 - a4^2/a1), E2 = c (a1 - a4^2/a2), E3 = c 1e-3 min(a1, a2), v12 = a4/a1, "
+           "v23 = v31 = 0 reproduce the law in plane stress to 0.2 % for any k; G12 = G23 = G31 = c sqrt(a1 a2)/4 "
+           "is assumed (the law has no shear term); k = the Ogden fit's bulk modulus";
+  return f;
 }
 
 RegionLaw region_law_from_preset(const MaterialLibrary& lib, const std::string& id) {

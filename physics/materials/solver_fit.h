@@ -27,6 +27,7 @@ struct LawCurve {
   LoadCase load = LoadCase::uniaxial_circumferential;
   bool equibiaxial = false;   ///< lateral stretch = stretch
   bool fitted = true;         ///< part of the fit (else only compared, see solver_fit.cpp)
+  bool direction_mean = false;  ///< the mean of the two uniaxial directions (membrane laws)
   std::vector<double> stretch;
   std::vector<double> nominal_stress_Pa;
   std::vector<double> fitted_stress_Pa;   ///< the solver form on the same stretches
@@ -65,6 +66,10 @@ struct SolverFit {
 /// (kelvin-cutting) and InputError when the fit is unstable or cannot be made.
 SolverFit fit_solver_material(const RegionLaw& law, const SolverFitOptions& options = {});
 
+/// The same fit to given samples of the law's paths (as law_curves makes them, with other
+/// stresses: a material band's percentile curves, see material_band.h).
+SolverFit fit_solver_curves(const RegionLaw& law, std::vector<LawCurve> curves, const SolverFitOptions& options = {});
+
 /// The law's loading paths that a solver form should reproduce: uniaxial (both in-plane
 /// directions for the membrane laws) and, for the membrane laws, equibiaxial.
 std::vector<LawCurve> law_curves(const RegionLaw& law, int samples);
@@ -72,6 +77,17 @@ std::vector<LawCurve> law_curves(const RegionLaw& law, int samples);
 /// Nominal stress (Pa) of an Ogden solid in the Abaqus convention, incompressible, along a path
 /// (uniaxial, or equibiaxial when `equibiaxial`).
 double ogden_nominal_Pa(const SolverMaterial& m, double stretch, bool equibiaxial);
+
+/// The membrane Fung law W = c/2 (e^Q − 1), Q = a1 Eθ² + a2 Ez² + 2 a4 Eθ Ez (thesis 5.1.3; a1
+/// circumferential, a2 longitudinal) as FEBio's Fung-ortho-compressible law with axes 1 =
+/// longitudinal, 2 = circumferential, 3 = wall normal. FEBio's normal-strain stiffness is the
+/// inverse of the orthotropic compliance, ℂ = c A, so A padded to 3×3 with no coupling to the
+/// normal and a33 = 10⁻³ min(a1, a2) (FEBio needs E3 > 0) gives
+///   E1 = c (a2 − a4²/a1), E2 = c (a1 − a4²/a2), E3 = c a33, v12 = a4/a1, v23 = v31 = 0,
+/// which reproduces the membrane law in plane stress for any k to O(a33) (0.2 %, measured in
+/// tests). The law has no shear term; G12 = G23 = G31 = c √(a1 a2)/4 is an assumption (it does not
+/// enter loading along the axes). `k_Pa` sets the through-thickness and volume stiffness only.
+FebioFungOrthotropic febio_fung_form(double c_Pa, double a1, double a2, double a4, double k_Pa);
 
 /// A region law from the built-in presets (`id` of data/materials.toml); UsageError when the
 /// preset does not exist, InputError when it has no calibrated range.

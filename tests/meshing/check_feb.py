@@ -115,6 +115,41 @@ def check(path):
             err.append("domain %s: material %s is not defined" % (d.get("name"), d.get("mat")))
     if doms != parts:
         err.append("MeshDomains %s do not follow the Elements blocks %s" % (doms, parts))
+    # Materials FEBio takes by their parameters: every one of the type's parameters, in range.
+    for m in r.find("Material"):
+        if m.get("type") == "Fung-ortho-compressible":
+            p = {}
+            for k in ["E1", "E2", "E3", "G12", "G23", "G31", "v12", "v23", "v31", "c", "k"]:
+                if m.find(k) is None:
+                    err.append("material %s: Fung-ortho-compressible needs %s" % (m.get("name"), k))
+                else:
+                    p[k] = float(m.find(k).text)
+            if len(p) == 11:
+                if min(p["E1"], p["E2"], p["E3"], p["c"], p["k"]) <= 0:
+                    err.append("material %s: E1, E2, E3, c and k must be positive" % m.get("name"))
+                if (p["v12"] > (p["E1"] / p["E2"]) ** 0.5 or p["v23"] > (p["E2"] / p["E3"]) ** 0.5
+                        or p["v31"] > (p["E3"] / p["E1"]) ** 0.5):
+                    err.append("material %s: Poisson's ratios FEBio refuses" % m.get("name"))
+    # MeshData (after MeshDomains, checked above): mat_axis per element of one Elements block
+    # (that block is one domain), lid 1..n in its order, a and d unit and orthogonal.
+    sizes = {b.get("name"): len(b) for b in mesh.findall("Elements")}
+    md = r.find("MeshData")
+    for ed in (md if md is not None else []):
+        name = ed.get("elem_set")
+        if ed.tag != "ElementData" or ed.get("type") != "mat_axis":
+            continue
+        if name not in sizes:
+            err.append("ElementData mat_axis: elem_set %s is no Elements block" % name)
+            continue
+        lids = [int(e.get("lid")) for e in ed]
+        if lids != list(range(1, sizes[name] + 1)):
+            err.append("ElementData mat_axis %s: lids are not 1..%d" % (name, sizes[name]))
+        for e in ed:
+            a = [float(v) for v in e.find("a").text.split(",")]
+            d = [float(v) for v in e.find("d").text.split(",")]
+            if abs(dot(a, a) - 1) > 1e-4 or abs(dot(d, d) - 1) > 1e-4 or abs(dot(a, d)) > 1e-4:
+                err.append("ElementData mat_axis %s element %s: a and d are not orthonormal" % (name, e.get("lid")))
+                break
     lcs = {int(l.get("id")) for l in r.iter("load_controller")}
     for el in r.iter():
         if el.get("lc") and int(el.get("lc")) not in lcs:

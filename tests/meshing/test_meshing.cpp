@@ -409,6 +409,15 @@ TEST(TetRepair, WallOneTetThickIsRepairedBySlidingOnItsCurvedSurfaces) {
 TEST_F(PhantomMeshes, ExportsRoundTripThroughIndependentReaders) {
   ScratchDir dir("meshing-export");
   ExportOptions eo;
+  // The gallbladder wall with a membrane Fung law (Table 5.1.1 mean as FEBio's Fung orthotropic
+  // form, physics/materials/solver_fit.h): the FEB takes the law with per-element axes. The other
+  // regions keep placeholders.
+  SolverMaterial wall;
+  wall.ogden_mu_Pa = {1e-3, 100.0, 1.0};
+  wall.ogden_alpha = {2.0, 20.0, 30.0};
+  wall.bulk_modulus_Pa = 1e5;
+  wall.febio_fung = FebioFungOrthotropic{300.111, 280.542, 0.326, 84.3, 84.3, 84.3, 0.386284, 0, 0, 19.11, 1e5, "test"};
+  eo.materials["gallbladder_wall"] = wall;
   const auto files = export_meshes(*meshes_, dir.path(), eo);
   ASSERT_FALSE(files.empty());
   for (const auto& f : files) EXPECT_TRUE(fs::exists(dir.path() / f)) << f;
@@ -457,6 +466,12 @@ TEST_F(PhantomMeshes, ExportsRoundTripThroughIndependentReaders) {
     EXPECT_EQ(count("<Surface name="), sm.surfaces.size());
     EXPECT_EQ(count("<SolidDomain "), 2u);
     EXPECT_EQ(count("<material id="), 2u);
+    EXPECT_EQ(count("type=\"Fung-ortho-compressible\""), 1u);
+    // One mat_axis per wall element; the checker below checks lids and orthonormality.
+    std::size_t wall_tets = 0;
+    for (std::size_t e = 0; e < sm.elements.size(); ++e) wall_tets += sm.region_names.at(sm.region_ids[e]) == "gallbladder_wall";
+    EXPECT_EQ(count("<e lid="), wall_tets);
+    EXPECT_LT(feb.find("</MeshDomains>"), feb.find("<MeshData>"));
   }
   // Independent readers: Debian's python3-meshio (STL OBJ PLY VTU MSH 4.1/2.2 INP), gmsh and
   // VTK (VTP, VTU), run by tests/meshing/check_exports.py when they are installed.
