@@ -21,6 +21,7 @@
 #include "physics/haptics/contact.h"
 #include "physics/materials/presets.h"
 #include "pipeline/simulate.h"
+#include "pipeline/simulation_picture.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/output_layout.h"
 #include "pipeline/output_scene.h"
@@ -310,7 +311,8 @@ class Runner {
       const auto& only = case_.stages.simulate.organs;
       if (!only.empty() && std::find(only.begin(), only.end(), o.name) == only.end()) {
         // Not asked for this time: its earlier results stay (carried into the new commit).
-        for (const fs::path& f : {layout_.simulation(o.name, "json"), layout_.simulation(o.name, "vtu")})
+        for (const fs::path& f : {layout_.simulation(o.name, "json"), layout_.simulation(o.name, "vtu"),
+                                   layout_.simulation(o.name, "png")})
           if (fs::exists(f)) {
             fs::create_directories(staged.simulation_dir());
             fs::copy_file(f, staged.simulation_dir() / f.filename());
@@ -334,6 +336,12 @@ class Runner {
       for (const char* f : {"job.frd", "job.cvg", "job.12d", "spooles.out"}) fs::remove(work / f);
       if (case_.stages.simulate.band) sim.result.band = simulate_band(o.name, work, so);
       write_simulation_files(sim.input, sim.frd, sim.result, staged.simulation_dir());
+      try {  // the picture is a review aid: without a display the numbers still stand
+        draw_simulation(sim, staged.simulation(o.name, "png"), case_.stages.snapshot.width_px,
+                        case_.stages.snapshot.height_px);
+      } catch (const DisplayError& e) {
+        spdlog::warn("simulate: {}: no picture ({})", o.name, e.message());
+      }
       const auto& r = sim.result;
       spdlog::info("simulate: {}: converged in {} increments, {:.1f} s; largest displacement {:.3g} mm, von Mises "
                    "{:.3g} Pa; reaction balance {:.2g} %",

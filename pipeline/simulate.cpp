@@ -236,11 +236,6 @@ void tri_shape(bool quadratic, double xi, double eta, double N[6], double dxi[6]
   deta[0] = -(4 * l1 - 1), deta[1] = 0, deta[2] = 4 * l3 - 1, deta[3] = -4 * l2, deta[4] = 4 * l2, deta[5] = 4 * (l1 - l3);
 }
 
-/// Von Mises stress of a stress tensor (xx yy zz xy yz zx), same unit.
-double von_mises(const std::array<double, 6>& s) {
-  return std::sqrt(0.5 * ((s[0] - s[1]) * (s[0] - s[1]) + (s[1] - s[2]) * (s[1] - s[2]) + (s[2] - s[0]) * (s[2] - s[0])) +
-                   3 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]));
-}
 
 /// Visits the quadrature points of face `f` with positions from `at`: shape functions N, the point
 /// x and the area vector n da (into the element, by the face's node order), weights included.
@@ -331,6 +326,11 @@ void evaluate_simulation(const SolverInput& in, const FrdResult& frd, Simulation
   };
   r.lumen_volume_mm3 = volume(false);
   r.lumen_volume_change_mm3 = volume(true) - r.lumen_volume_mm3;
+}
+
+double von_mises(const std::array<double, 6>& s) {
+  return std::sqrt(0.5 * ((s[0] - s[1]) * (s[0] - s[1]) + (s[1] - s[2]) * (s[1] - s[2]) + (s[2] - s[0]) * (s[2] - s[0])) +
+                   3 * (s[3] * s[3] + s[4] * s[4] + s[5] * s[5]));
 }
 
 nlohmann::json SimulationResult::to_json() const {

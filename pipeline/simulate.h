@@ -51,6 +51,9 @@ struct FrdResult {
 };
 FrdResult read_frd(const std::filesystem::path& frd, std::size_t node_count);
 
+/// Von Mises stress of a stress tensor (xx yy zz xy yz zx), same unit.
+double von_mises(const std::array<double, 6>& stress);
+
 struct SimulateOptions {
   std::string solver = "ccx";  ///< executable, looked up on PATH
   int threads = 0;             ///< OpenMP threads of the solver; 0 = every core

@@ -53,6 +53,18 @@ struct SceneTool {
   std::optional<Eigen::Vector3d> force_N;                 ///< drawn as an arrow from the tip when given
 };
 
+/// A solver's answer on an organ (the simulate stage): its boundary surface undeformed and
+/// deformed (the same triangles), with a value per vertex of the deformed one. Drawn as the view
+/// "simulation_<organ>": the deformed surface coloured by the value over the undeformed one,
+/// translucent.
+struct SceneDeformation {
+  std::string organ;
+  SurfaceMesh undeformed, deformed;
+  std::vector<double> values;    ///< per vertex of `deformed`
+  std::string value_title;       ///< colour bar title, e.g. "von Mises, Pa"
+  std::string detail;            ///< line under the title: load, largest displacement, …
+};
+
 /// One series of an XY plot.
 struct PlotSeries {
   std::string name;
@@ -96,6 +108,7 @@ struct SnapshotScene {
   std::vector<ScenePath> paths;
   std::optional<SceneTool> tool;
   std::vector<Plot> plots;
+  std::vector<SceneDeformation> deformations;
 };
 
 }  // namespace organsmith

@@ -1,5 +1,5 @@
-// Over 400 lines: every kind of snapshot view (3D organs, overview, slices, tet cuts, plots) and
-// the one renderer they share.
+// Over 400 lines: every kind of snapshot view (3D organs, overview, slices, tet cuts, plots, a
+// solver's deformed organ) and the one renderer they share.
 // Off-screen snapshot views.
 
 #include "viewer/snapshot.h"
@@ -25,6 +25,7 @@
 #include <vtkPlot.h>
 #include <vtkPlotPoints.h>
 #include <vtkPoints.h>
+#include <vtkPointData.h>
 #include <vtkPolyDataMapper.h>
 #include <vtkProperty.h>
 #include <vtkProperty2D.h>
@@ -573,6 +574,73 @@ struct SnapshotRenderer::Impl {
     window->AddRenderer(r);
   }
 
+  void view_deformation(const SceneDeformation& d) {
+    const Layout L = layout_of(opt);
+    auto r = main_area(L, 0, 1, false);
+    // The undeformed organ, translucent grey: the outline the deformation is read against.
+    SceneSurface before;
+    before.mesh = d.undeformed;
+    before.colour = Rgb{0.55, 0.56, 0.6};
+    before.opacity = 0.22;
+    r->AddViewProp(surface_actor(before));
+    // The deformed organ coloured by the value; the range ends at its 98th percentile so that a
+    // few peak vertices (at the fixed set's edge) do not wash out the rest.
+    auto pd = to_polydata(d.deformed);
+    auto values = Ptr<vtkDoubleArray>::New();
+    values->SetName("value");
+    for (double v : d.values) values->InsertNextValue(v);
+    pd->GetPointData()->SetScalars(values);
+    std::vector<double> sorted = d.values;
+    std::sort(sorted.begin(), sorted.end());
+    const double top = sorted.empty() ? 1.0 : std::max(sorted[std::size_t(0.98 * double(sorted.size() - 1))], 1e-12);
+    auto lut = Ptr<vtkLookupTable>::New();
+    lut->SetTableRange(0, top);
+    lut->SetHueRange(0.667, 0.0);  // blue (low) → red (high)
+    lut->SetSaturationRange(0.85, 0.85);
+    lut->SetValueRange(0.95, 0.95);
+    lut->SetNumberOfTableValues(256);
+    lut->Build();
+    auto mapper = Ptr<vtkPolyDataMapper>::New();
+    mapper->SetInputData(pd);
+    mapper->SetLookupTable(lut);
+    mapper->SetScalarModeToUsePointData();
+    mapper->SetScalarRange(0, top);
+    mapper->ScalarVisibilityOn();
+    auto actor = Ptr<vtkActor>::New();
+    actor->SetMapper(mapper);
+    actor->GetProperty()->SetAmbient(0.25);
+    r->AddViewProp(actor);
+    const int vh = L.h - L.band;
+    std::array<double, 6> b{};
+    if (visible_bounds(r, b)) {
+      fit_parallel_camera(r, b, anterior_view(25, 20), Eigen::Vector3d(0, 0, 1), double(L.w) / vh, 0.12);
+      add_scale_bar(r, mm_per_px(r, vh), L.w, vh, kDarkText);
+    }
+    auto bar = Ptr<vtkScalarBarActor>::New();
+    bar->SetLookupTable(lut);
+    bar->SetTitle(d.value_title.c_str());
+    bar->SetNumberOfLabels(6);
+    bar->SetLabelFormat("%.3g");
+    bar->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
+    bar->GetPositionCoordinate()->SetValue(0.89, 0.12);
+    bar->SetWidth(0.09);
+    bar->SetHeight(0.76);
+    bar->UnconstrainedFontSizeOn();
+    for (vtkTextProperty* tp : {bar->GetTitleTextProperty(), bar->GetLabelTextProperty()}) {
+      tp->SetColor(kDarkText.r, kDarkText.g, kDarkText.b);
+      tp->ItalicOff();
+      tp->ShadowOff();
+    }
+    bar->GetTitleTextProperty()->SetFontSize(std::max(10, vh / 45));
+    bar->GetLabelTextProperty()->SetFontSize(std::max(10, vh / 50));
+    r->AddViewProp(bar);
+    r->AddViewProp(text("grey: undeformed; colour range ends at the 98th percentile (" + format_g(top, 3) + ")",
+                        std::max(10, vh / 52), kGreyText, L.w - 0.015 * L.w, 0.02 * vh, 2, 0));
+    window->AddRenderer(title_band(L, capitalised(d.organ) + " - deformed under its load case, coloured by stress", d.detail,
+                                   Rgb{1, 1, 1}, kDarkText, kGreyText));
+    window->AddRenderer(r);
+  }
+
   void view_plot(const Plot& p) {
     const Layout L = layout_of(opt);
     auto r = Ptr<vtkRenderer>::New();
@@ -662,6 +730,12 @@ struct SnapshotRenderer::Impl {
       for (const auto& t : scene.tet_meshes)
         if (!built && name == "tets_" + t.organ) {
           view_tets(scene, t);
+          built = true;
+        }
+    } else if (name.rfind("simulation_", 0) == 0) {
+      for (const auto& d : scene.deformations)
+        if (!built && name == "simulation_" + d.organ) {
+          view_deformation(d);
           built = true;
         }
     } else if (name.rfind("plot_", 0) == 0) {

@@ -1,0 +1,70 @@
+// The simulate stage's picture (see simulation_picture.h).
+
+#include "pipeline/simulation_picture.h"
+
+#include "core/format.h"
+#include "viewer/snapshot.h"
+
+#include <algorithm>
+#include <map>
+#include <set>
+
+namespace organsmith {
+
+void draw_simulation(const Simulation& sim, const std::filesystem::path& png, int width_px, int height_px) {
+  const SolverModel& m = sim.input.model;
+  // The boundary of the tetrahedra: corner faces that belong to one element only, turned so that
+  // their normals point out (a face's node order points into its element).
+  std::map<std::array<std::int32_t, 3>, std::pair<int, std::array<std::int32_t, 3>>> faces;
+  for (std::size_t e = 0; e < m.elements.size(); ++e)
+    for (std::int32_t f = 0; f < 4; ++f) {
+      const auto n = m.face_nodes(SolverFace{std::int32_t(e), f});
+      std::array<std::int32_t, 3> key{n[0], n[1], n[2]};
+      std::sort(key.begin(), key.end());
+      auto& slot = faces[key];
+      ++slot.first;
+      slot.second = {n[0], n[2], n[1]};
+    }
+  SceneDeformation d;
+  d.organ = sim.result.organ;
+  std::map<std::int32_t, std::int32_t> vertex;  // node → vertex of the drawn surface
+  for (const auto& [key, f] : faces) {
+    if (f.first != 1) continue;
+    std::array<std::int32_t, 3> tri{};
+    for (int k = 0; k < 3; ++k) {
+      const std::int32_t node = f.second[std::size_t(k)];
+      auto [it, fresh] = vertex.emplace(node, std::int32_t(vertex.size()));
+      if (fresh) {
+        const Eigen::Vector3d x = m.nodes_lps_mm[std::size_t(node)];
+        const auto& u = sim.frd.displacement_mm[std::size_t(node)];
+        d.undeformed.vertices_lps_mm.push_back(x);
+        d.deformed.vertices_lps_mm.push_back(x + Eigen::Vector3d(u[0], u[1], u[2]));
+        d.values.push_back(1e6 * von_mises(sim.frd.stress_MPa[std::size_t(node)]));
+      }
+      tri[std::size_t(k)] = it->second;
+    }
+    d.undeformed.triangles.push_back(tri);
+  }
+  d.deformed.triangles = d.undeformed.triangles;
+  const SimulationResult& r = sim.result;
+  d.value_title = "von Mises, Pa";
+  // Set names without the organ and "_nodes": "trachea_cuts_nodes" → "cuts".
+  auto bare = [&](std::string n) {
+    if (n.rfind(d.organ + "_", 0) == 0) n = n.substr(d.organ.size() + 1);
+    if (n.size() > 6 && n.compare(n.size() - 6, 6, "_nodes") == 0) n.resize(n.size() - 6);
+    std::replace(n.begin(), n.end(), '_', ' ');
+    return n;
+  };
+  d.detail = format_g(sim.input.pressure_MPa * 1e3, 3) + " kPa in the " + bare(sim.input.pressure_surface) + ", " +
+             bare(sim.input.fixed_node_set) + " fixed  |  largest displacement " + format_g(r.max_displacement_mm, 3) +
+             " mm  |  " + std::to_string(r.increments) + " increments";
+  SnapshotScene scene;
+  scene.deformations.push_back(std::move(d));
+  SnapshotOptions so;
+  so.width_px = width_px;
+  so.height_px = height_px;
+  SnapshotRenderer renderer(so);
+  renderer.render_to_png(scene, "simulation_" + sim.result.organ, png);
+}
+
+}  // namespace organsmith
