@@ -334,6 +334,18 @@ class Runner {
       Simulation sim = simulate_inp(inp, work, so, progress_);
       // Keep the solver's account (log, status, printed totals), not its bulky result file.
       for (const char* f : {"job.frd", "job.cvg", "job.12d", "spooles.out"}) fs::remove(work / f);
+      {  // the answer against the range each region's law was calibrated over
+        const auto materials = region_materials(case_.registry);
+        for (auto& [region, st] : sim.result.principal_stretch)
+          if (const auto it = materials.find(region); it != materials.end()) {
+            st.calibrated_max = it->second.stretch_max;
+            if (st.p99 > st.calibrated_max)
+              spdlog::warn("simulate: {}: {} is stretched to {:.3g} (99th percentile of its elements; largest {:.3g}), "
+                           "beyond the {:.3g} its law was calibrated to: there the answer is the fitted solid's "
+                           "extrapolation; lower the pressure or give tissue data that reach that far",
+                           o.name, region, st.p99, st.max, st.calibrated_max);
+          }
+      }
       if (case_.stages.simulate.band) sim.result.band = simulate_band(o.name, work, so);
       write_simulation_files(sim.input, sim.frd, sim.result, staged.simulation_dir());
       try {  // the picture is a review aid: without a display the numbers still stand

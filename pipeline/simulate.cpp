@@ -11,7 +11,8 @@
 #include "pipeline/runner.h"
 #include "meshing/export.h"
 
-#include <Eigen/Geometry>
+#include <Eigen/Dense>
+#include <Eigen/Eigenvalues>
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
@@ -305,6 +306,28 @@ void evaluate_simulation(const SolverInput& in, const FrdResult& frd, Simulation
     if (!active[v]) continue;
     r.max_von_mises_Pa = std::max(r.max_von_mises_Pa, von_mises(frd.stress_MPa[v]) * 1e6);
   }
+  // Principal stretches per active element from its corners: F = ∂x/∂X of the linear tet.
+  std::map<std::string, std::vector<double>> stretches;
+  for (std::size_t e = 0; e < m.elements.size(); ++e) {
+    const std::string& region = m.region_names.at(m.region_ids[e]);
+    if (std::find(in.inactive_regions.begin(), in.inactive_regions.end(), region) != in.inactive_regions.end()) continue;
+    const auto& el = m.elements[e];
+    Eigen::Matrix3d dX, dx;
+    for (int k = 0; k < 3; ++k) {
+      dX.col(k) = m.nodes_lps_mm[std::size_t(el[k + 1])] - m.nodes_lps_mm[std::size_t(el[0])];
+      dx.col(k) = deformed(el[k + 1]) - deformed(el[0]);
+    }
+    if (std::abs(dX.determinant()) < 1e-12) continue;
+    const Eigen::Matrix3d F = dx * dX.inverse();
+    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(F.transpose() * F, Eigen::EigenvaluesOnly);
+    stretches[region].push_back(std::sqrt(std::max(0.0, eig.eigenvalues()(2))));
+  }
+  for (auto& [region, v] : stretches) {
+    std::sort(v.begin(), v.end());
+    auto& s = r.principal_stretch[region];
+    s.max = v.back();
+    s.p99 = v[std::size_t(0.99 * double(v.size() - 1))];
+  }
   // Lumen volume by the divergence theorem with the field (x_a, 0, 0), a an axis no cut face is
   // normal to, so that the open ends of a tube add nothing: V = ∫ x_a n_a da over the lumen
   // (n out of the lumen = into the wall element).
@@ -350,6 +373,15 @@ nlohmann::json SimulationResult::to_json() const {
           {"lumen_volume_mm3", lumen_volume_mm3},
           {"lumen_volume_change_mm3", lumen_volume_change_mm3},
           {"solver_message", solver_message}};
+  nlohmann::json ps = nlohmann::json::object();
+  for (const auto& [region, st] : principal_stretch) {
+    ps[region] = {{"max", st.max}, {"p99", st.p99}};
+    if (st.calibrated_max > 0) {
+      ps[region]["calibrated_max"] = st.calibrated_max;
+      ps[region]["beyond_calibrated_range"] = st.p99 > st.calibrated_max;
+    }
+  }
+  j["principal_stretch"] = ps;
   if (!band.is_null()) j["band"] = band;
   return j;
 }

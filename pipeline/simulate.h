@@ -75,6 +75,14 @@ struct SimulationResult {
   double max_von_mises_Pa = 0.0;
   double lumen_volume_mm3 = 0.0, lumen_volume_change_mm3 = 0.0;
   std::string solver_message;     ///< the solver's own words when it failed
+  /// Largest principal stretch of the active elements, per region (from the corner
+  /// displacements: the element's mean deformation): the largest and the 99th percentile. A law
+  /// is only known up to its calibrated stretch (`calibrated_stretch_max`, set by the caller from
+  /// the region's material); beyond it the answer is the fitted solid's extrapolation.
+  struct RegionStretch {
+    double max = 1.0, p99 = 1.0, calibrated_max = 0.0;  ///< calibrated_max 0 = unknown
+  };
+  std::map<std::string, RegionStretch> principal_stretch;
   /// The material band's runs (see band_summary), null when none were run.
   nlohmann::json band;
   nlohmann::json to_json() const;

@@ -257,6 +257,12 @@ TEST(Simulate, MaterialBandBracketsTheOrgansAnswer) {
   EXPECT_DOUBLE_EQ(s["band"]["max_displacement_mm"][0].get<double>(), d95);
   EXPECT_DOUBLE_EQ(s["band"]["max_displacement_mm"][1].get<double>(), d05);
   for (const char* v : {"p05", "p50", "p95"}) EXPECT_LT(runs[v]["reaction_balance_error"].get<double>(), 0.01) << v;
+  // The wall's stretch against its law's calibrated range (stretch 1.3, thesis §5.1.2).
+  const auto& st = s["principal_stretch"]["trachea_wall"];
+  EXPECT_GT(st["max"].get<double>(), 1.0);
+  EXPECT_GE(st["max"].get<double>(), st["p99"].get<double>());
+  EXPECT_DOUBLE_EQ(st["calibrated_max"].get<double>(), 1.3);
+  EXPECT_EQ(st["beyond_calibrated_range"].get<bool>(), st["p99"].get<double>() > 1.3);
 
   // The picture: the deformed organ in colour (the stress map) on a white ground.
   const RgbImage png = read_png(out / "simulation" / "trachea.png");
