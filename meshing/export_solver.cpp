@@ -261,6 +261,13 @@ void write_msh22(const SolverModel& m, const fs::path& path, bool ras) {
   write_atomic(path, s);
 }
 
+namespace {
+/// A number for an INP data line. CalculiX reads at most 20 characters per field (a node line with
+/// -1.3633504295285093E-05, the shortest round trip of a coordinate, stops it with "*ERROR reading
+/// *NODE"): 12 significant digits take at most 18, and 1e-10 mm is far below any mesh's precision.
+std::string inp_num(double v) { return format_g(v, 12); }
+}  // namespace
+
 void write_inp(const SolverModel& m, const std::map<std::string, SolverMaterial>& materials,
                const SolverScenario& scenario, const fs::path& path, bool ras, std::vector<std::string>* warnings) {
   const auto regions = regions_of(m);
@@ -277,7 +284,7 @@ void write_inp(const SolverModel& m, const std::map<std::string, SolverMaterial>
   s += "*HEADING\norgansmith " + m.organ + "\n*NODE, NSET=ALLNODES\n";
   for (std::size_t i = 0; i < m.nodes_lps_mm.size(); ++i) {
     const Eigen::Vector3d p = out_point(m.nodes_lps_mm[i], ras);
-    s += std::to_string(i + 1) + ", " + num(p.x()) + ", " + num(p.y()) + ", " + num(p.z()) + "\n";
+    s += std::to_string(i + 1) + ", " + inp_num(p.x()) + ", " + inp_num(p.y()) + ", " + inp_num(p.z()) + "\n";
   }
   for (const auto& [id, name] : regions) {
     s += "*ELEMENT, TYPE=" + type + ", ELSET=" + name + "\n";
@@ -306,7 +313,7 @@ void write_inp(const SolverModel& m, const std::map<std::string, SolverMaterial>
       if (warnings) warnings->push_back(name + ": no material given; wrote a placeholder neo-Hookean solid (E = 10 kPa, ν = 0.45)");
       const double E = 0.01, nu = 0.45;
       s += "** placeholder: no material was given for this region (E = 10 kPa, nu = 0.45)\n";
-      s += "*HYPERELASTIC, NEO HOOKE\n" + num(E / (4 * (1 + nu))) + ", " + num(2.0 / (E / (3 * (1 - 2 * nu)))) + "\n";
+      s += "*HYPERELASTIC, NEO HOOKE\n" + inp_num(E / (4 * (1 + nu))) + ", " + inp_num(2.0 / (E / (3 * (1 - 2 * nu)))) + "\n";
     } else {
       const SolverMaterial& sm = it->second;
       s += "** " + sm.note + "\n** bulk modulus " + num(sm.bulk_modulus_Pa) + " Pa: " + sm.bulk_source + "\n";
@@ -340,7 +347,7 @@ void write_inp(const SolverModel& m, const std::map<std::string, SolverMaterial>
     }
     s += "*BOUNDARY\n" + sc.fixed_nodes + ", 1, 3\n";
     if (!loose.empty()) s += m.organ + "_inactive_only_nodes, 1, 3\n";
-    s += "*DSLOAD\n" + sc.pressure_surface + ", P, " + num(sc.pressure_MPa) + "\n";
+    s += "*DSLOAD\n" + sc.pressure_surface + ", P, " + inp_num(sc.pressure_MPa) + "\n";
     s += "*NODE FILE\nU\n*EL FILE\nS\n";
     s += "*NODE PRINT, NSET=" + sc.fixed_nodes + ", TOTALS=ONLY\nRF\n*END STEP\n";
   }
