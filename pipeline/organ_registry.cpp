@@ -1,3 +1,5 @@
+// Over 400 lines: the organ registry (its TOML reader and checks) and the organ regions' materials as
+// solver fits and bands, with their JSON for materials.json; one reader of data/organs.toml and its users.
 #include "pipeline/organ_registry.h"
 
 #include "core/errors.h"

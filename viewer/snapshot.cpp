@@ -495,6 +495,36 @@ struct SnapshotRenderer::Impl {
     window->AddRenderer(make_panel(split, 1, right_w, true));
   }
 
+  /// A 3-D view's framing (anterior, from the right and above; scale bar) and its colour bar for
+  /// `lut` on the right.
+  void frame_and_colour_bar(vtkRenderer* r, const Layout& L, vtkLookupTable* lut, const char* title,
+                            const char* label_format) {
+    const int vh = L.h - L.band;
+    std::array<double, 6> b{};
+    if (visible_bounds(r, b)) {
+      fit_parallel_camera(r, b, anterior_view(25, 20), Eigen::Vector3d(0, 0, 1), double(L.w) / vh, 0.12);
+      add_scale_bar(r, mm_per_px(r, vh), L.w, vh, kDarkText);
+    }
+    auto bar = Ptr<vtkScalarBarActor>::New();
+    bar->SetLookupTable(lut);
+    bar->SetTitle(title);
+    bar->SetNumberOfLabels(6);
+    bar->SetLabelFormat(label_format);
+    bar->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
+    bar->GetPositionCoordinate()->SetValue(0.89, 0.12);
+    bar->SetWidth(0.09);
+    bar->SetHeight(0.76);
+    bar->UnconstrainedFontSizeOn();
+    for (vtkTextProperty* tp : {bar->GetTitleTextProperty(), bar->GetLabelTextProperty()}) {
+      tp->SetColor(kDarkText.r, kDarkText.g, kDarkText.b);
+      tp->ItalicOff();
+      tp->ShadowOff();
+    }
+    bar->GetTitleTextProperty()->SetFontSize(std::max(10, vh / 45));
+    bar->GetLabelTextProperty()->SetFontSize(std::max(10, vh / 50));
+    r->AddViewProp(bar);
+  }
+
   void view_tets(const SnapshotScene&, const SceneTetMesh& t) {
     const Layout L = layout_of(opt);
     const TetMesh& m = t.mesh;
@@ -537,30 +567,7 @@ struct SnapshotRenderer::Impl {
     auto r = main_area(L, 0, 1, false);
     r->AddViewProp(actor);
     const int vh = L.h - L.band;
-    std::array<double, 6> b{};
-    if (visible_bounds(r, b)) {
-      fit_parallel_camera(r, b, anterior_view(25, 20), Eigen::Vector3d(0, 0, 1), double(L.w) / vh, 0.12);
-      add_scale_bar(r, mm_per_px(r, vh), L.w, vh, kDarkText);
-    }
-    auto bar = Ptr<vtkScalarBarActor>::New();
-    bar->SetLookupTable(lut);
-    bar->SetTitle("3 r_in / R_circ");
-    bar->SetNumberOfLabels(6);
-    bar->SetLabelFormat("%.1f");
-    bar->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
-    bar->GetPositionCoordinate()->SetValue(0.89, 0.12);
-    bar->SetWidth(0.09);
-    bar->SetHeight(0.76);
-    bar->UnconstrainedFontSizeOn();
-    bar->GetTitleTextProperty()->SetColor(kDarkText.r, kDarkText.g, kDarkText.b);
-    bar->GetTitleTextProperty()->SetFontSize(std::max(10, vh / 45));
-    bar->GetTitleTextProperty()->ItalicOff();
-    bar->GetTitleTextProperty()->ShadowOff();
-    bar->GetLabelTextProperty()->SetColor(kDarkText.r, kDarkText.g, kDarkText.b);
-    bar->GetLabelTextProperty()->SetFontSize(std::max(10, vh / 50));
-    bar->GetLabelTextProperty()->ItalicOff();
-    bar->GetLabelTextProperty()->ShadowOff();
-    r->AddViewProp(bar);
+    frame_and_colour_bar(r, L, lut, "3 r_in / R_circ", "%.1f");
     std::vector<double> sorted = all_q;
     std::sort(sorted.begin(), sorted.end());
     const double qmin = sorted.empty() ? 0 : sorted.front(), qmed = sorted.empty() ? 0 : sorted[sorted.size() / 2];
@@ -611,29 +618,7 @@ struct SnapshotRenderer::Impl {
     actor->GetProperty()->SetAmbient(0.25);
     r->AddViewProp(actor);
     const int vh = L.h - L.band;
-    std::array<double, 6> b{};
-    if (visible_bounds(r, b)) {
-      fit_parallel_camera(r, b, anterior_view(25, 20), Eigen::Vector3d(0, 0, 1), double(L.w) / vh, 0.12);
-      add_scale_bar(r, mm_per_px(r, vh), L.w, vh, kDarkText);
-    }
-    auto bar = Ptr<vtkScalarBarActor>::New();
-    bar->SetLookupTable(lut);
-    bar->SetTitle(d.value_title.c_str());
-    bar->SetNumberOfLabels(6);
-    bar->SetLabelFormat("%.3g");
-    bar->GetPositionCoordinate()->SetCoordinateSystemToNormalizedViewport();
-    bar->GetPositionCoordinate()->SetValue(0.89, 0.12);
-    bar->SetWidth(0.09);
-    bar->SetHeight(0.76);
-    bar->UnconstrainedFontSizeOn();
-    for (vtkTextProperty* tp : {bar->GetTitleTextProperty(), bar->GetLabelTextProperty()}) {
-      tp->SetColor(kDarkText.r, kDarkText.g, kDarkText.b);
-      tp->ItalicOff();
-      tp->ShadowOff();
-    }
-    bar->GetTitleTextProperty()->SetFontSize(std::max(10, vh / 45));
-    bar->GetLabelTextProperty()->SetFontSize(std::max(10, vh / 50));
-    r->AddViewProp(bar);
+    frame_and_colour_bar(r, L, lut, d.value_title.c_str(), "%.3g");
     r->AddViewProp(text("grey: undeformed; colour range ends at the 98th percentile (" + format_g(top, 3) + ")",
                         std::max(10, vh / 52), kGreyText, L.w - 0.015 * L.w, 0.02 * vh, 2, 0));
     window->AddRenderer(title_band(L, capitalised(d.organ) + " - deformed under its load case, coloured by stress", d.detail,
