@@ -395,7 +395,13 @@ OrganMesh mesh_one(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOpti
     transform_to_lps(lm.grid, m);
     Timeline::Scope step{tl, "measure " + name};
     NamedSurface ns{std::move(name), std::move(m), {}};
-    ns.quality = measure_surface(ns.mesh, o.edge_mm);
+    // The fold gate looks at the organ's own boundary (where the label's staircase is), not at a
+    // cut organ (its rims are meant to be sharp) nor at the inner wall: an offset inwards by the
+    // wall folds by edge / (R − wall) where the organ folds by edge / R, a narrow neck's true
+    // curvature at a coarse edge, not a staircase.
+    SurfaceGuarantees g;
+    if (compare && !any_cut && spec.model != OrganModel::tube) g.max_fold_deg = o.max_fold_deg;
+    ns.quality = measure_surface(ns.mesh, o.edge_mm, g);
     if (compare) compare_with_label(ns.quality, ns.mesh, p.kept, 1, p.label_volume_mm3);
     return ns;
   };

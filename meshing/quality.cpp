@@ -22,6 +22,7 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <map>
 #include <sstream>
@@ -114,6 +115,34 @@ SurfaceQuality measure_surface(const SurfaceMesh& s, double target, const Surfac
     q.edge_mean_mm = sum / double(lengths.size());
     q.edge_within_tolerance = double(within) / double(lengths.size());
   }
+  // Folds: the angle between the normals of the two triangles on each interior edge.
+  {
+    std::vector<std::array<std::int32_t, 3>> he;  // (min vertex, max vertex, triangle)
+    he.reserve(3 * s.triangles.size());
+    for (std::size_t t = 0; t < s.triangles.size(); ++t)
+      for (int e = 0; e < 3; ++e) {
+        const std::int32_t a = s.triangles[t][e], b = s.triangles[t][(e + 1) % 3];
+        he.push_back({std::min(a, b), std::max(a, b), std::int32_t(t)});
+      }
+    std::sort(he.begin(), he.end());
+    auto normal = [&](std::int32_t t) {
+      const auto& tri = s.triangles[std::size_t(t)];
+      const auto &a = s.vertices_lps_mm[tri[0]], &b = s.vertices_lps_mm[tri[1]], &c = s.vertices_lps_mm[tri[2]];
+      return Eigen::Vector3d((b - a).cross(c - a).normalized());
+    };
+    std::vector<double> folds;
+    for (std::size_t i = 0; i + 1 < he.size(); ++i) {
+      if (he[i][0] != he[i + 1][0] || he[i][1] != he[i + 1][1]) continue;
+      if (i + 2 < he.size() && he[i + 2][0] == he[i][0] && he[i + 2][1] == he[i][1]) continue;  // non-manifold edge
+      const double c = std::clamp(normal(he[i][2]).dot(normal(he[i + 1][2])), -1.0, 1.0);
+      folds.push_back(std::acos(c) * 180.0 / M_PI);
+      if (g.max_fold_deg > 0 && folds.back() > g.max_fold_deg) ++q.folds_above_limit;
+    }
+    if (!folds.empty()) {
+      q.fold_max_deg = *std::max_element(folds.begin(), folds.end());
+      q.fold_p99_deg = percentile(folds, 0.99);
+    }
+  }
   if (!angles.empty()) {
     q.angle_min_deg = *std::min_element(angles.begin(), angles.end());
     q.angle_p1_deg = percentile(angles, 0.01);
@@ -131,6 +160,9 @@ SurfaceQuality measure_surface(const SurfaceMesh& s, double target, const Surfac
          " % of " + fmt(target) + " mm (need " + fmt(100 * g.edge_fraction) + " %)");
   if (q.angle_min_deg < g.min_angle_deg)
     fail("smallest angle " + fmt(q.angle_min_deg) + "° < " + fmt(g.min_angle_deg) + "°");
+  if (q.folds_above_limit > 0)
+    fail(std::to_string(q.folds_above_limit) + " edges folded beyond " + fmt(g.max_fold_deg) + "° (largest " +
+         fmt(q.fold_max_deg) + "°): a staircase sharper than the edge length can carry");
   return q;
 }
 
@@ -274,6 +306,7 @@ nlohmann::json to_json(const SurfaceQuality& q) {
                       {"edge_length_mm", {{"min", q.edge_min_mm}, {"mean", q.edge_mean_mm}, {"max", q.edge_max_mm}}},
                       {"edges_within_25pct_of_target", q.edge_within_tolerance},
                       {"min_angle_deg", q.angle_min_deg}, {"angle_p1_deg", q.angle_p1_deg},
+                      {"fold_max_deg", q.fold_max_deg}, {"fold_p99_deg", q.fold_p99_deg},
                       {"area_mm2", q.area_mm2}, {"volume_mm3", q.volume_mm3}};
   if (q.reference_volume_mm3 > 0) {
     j["label_volume_mm3"] = q.reference_volume_mm3;

@@ -20,6 +20,11 @@ struct SurfaceGuarantees {
   double edge_fraction = 0.90;           ///< … for at least 90 % of them
   double min_angle_deg = 25.0;           ///< smallest triangle angle
   double volume_tolerance = 0.03;        ///< |V_mesh − V_label| / V_label
+  /// Largest fold: the angle between the normals of two triangles sharing an edge (0 = not
+  /// checked). On a smooth organ a fold of θ needs a radius of curvature of about edge / θ, so a
+  /// fold beyond ~60° is a feature the edge length cannot carry: a voxel staircase left on a
+  /// coarse scan, which a solver's shell elements buckle at.
+  double max_fold_deg = 0.0;
 };
 
 struct SurfaceQuality {
@@ -30,6 +35,8 @@ struct SurfaceQuality {
   double edge_min_mm = 0.0, edge_mean_mm = 0.0, edge_max_mm = 0.0;
   double edge_within_tolerance = 0.0;  ///< fraction of edges within ±tolerance of the target
   double angle_min_deg = 0.0, angle_p1_deg = 0.0;  ///< smallest angle; 1st percentile
+  double fold_max_deg = 0.0, fold_p99_deg = 0.0;   ///< largest fold between neighbouring triangles; 99th percentile
+  std::int64_t folds_above_limit = 0;              ///< edges folded beyond SurfaceGuarantees::max_fold_deg
   double area_mm2 = 0.0, volume_mm3 = 0.0;
   double reference_volume_mm3 = 0.0;  ///< label volume compared against (0 = not compared)
   double volume_error = 0.0;          ///< (V_mesh − V_label) / V_label

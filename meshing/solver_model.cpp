@@ -377,13 +377,13 @@ SolverModel build_solver_model(const OrganMesh& organ, const SolverModelOptions&
       std::vector<SolverFace> bed;
       const Eigen::Vector3d dir = o.bed_direction_lps.normalized();
       const double c = std::cos(o.bed_angle_deg * M_PI / 180.0);
-      bool by_liver = false;
-      if (o.liver_distance_mm) {
+      bool by_score = false;
+      if (o.liver_bed_score) {
         for (const auto& f : boundary)
-          if (o.liver_distance_mm(centroid(m, f)) <= o.bed_distance_mm) bed.push_back(f);
-        by_liver = !bed.empty();
+          if (o.liver_bed_score(centroid(m, f)) >= 0.5) bed.push_back(f);
+        by_score = !bed.empty();
       }
-      if (!by_liver)
+      if (!by_score)
         for (const auto& f : boundary)
           if (m.face_area_out_mm2(f).normalized().dot(dir) >= c) bed.push_back(f);
       if (bed.empty()) {
@@ -391,9 +391,9 @@ SolverModel build_solver_model(const OrganMesh& organ, const SolverModelOptions&
       } else {
       m.surfaces[n + "_liver_bed"] = largest_component(bed);
       m.notes.push_back(n + "_liver_bed: " +
-                        (by_liver ? std::string("surface within ") + std::to_string(o.bed_distance_mm).substr(0, 4) +
-                                        " mm of the liver label"
-                                  : "surface facing superior-right (the liver's side; no liver label touches it)") +
+                        (by_score ? "the liver bed from the " + o.liver_bed_source
+                                  : o.liver_bed_score ? "surface facing superior-right (the liver bed given lies off the mesh)"
+                                                      : std::string("surface facing superior-right (the liver's side)")) +
                         ", " + std::to_string(int(std::round(area(m.surfaces[n + "_liver_bed"])))) + " mm2");
       }
     }

@@ -12,9 +12,9 @@
 // Surfaces (names prefixed by the organ):
 //   wall_body (gallbladder): <organ>_outer (the organ's boundary), <organ>_lumen (the wall's
 //     inner face, where wall meets body; faces of wall elements) and <organ>_liver_bed (the part of
-//     the outer surface facing the liver: within `bed_distance_mm` of a liver voxel when a liver
-//     mask is given, else whose outward normal lies within `bed_angle_deg` of `bed_direction_lps`;
-//     the largest connected patch).
+//     the outer surface in the liver bed: where `liver_bed_score` ≥ 0.5 when the pipeline gives
+//     one (liver label or CT), else whose outward normal lies within `bed_angle_deg` of
+//     `bed_direction_lps`; the largest connected patch).
 //   tube (trachea): <organ>_outer, <organ>_lumen, <organ>_cranial and <organ>_caudal (the flat
 //     cut faces at the top and bottom of the tube).
 //   solid: <organ>_outer.
@@ -49,9 +49,12 @@ struct SolverModelOptions {
   bool quadratic = true;
   Eigen::Vector3d bed_direction_lps{-0.3, 0.0, 1.0};
   double bed_angle_deg = 60.0;
-  double bed_distance_mm = 2.0;
-  /// Distance (mm) from a point to the nearest liver voxel, when a liver label exists.
-  std::function<double(const Eigen::Vector3d&)> liver_distance_mm;
+  /// The liver bed where the pipeline knows it (the guide stage's rule: the liver label, else the
+  /// CT): per point of the organ's surface (LPS mm), a score in [0, 1], the bed ≥ 0.5; and where
+  /// the bed came from, for the notes. Empty: the faces within `bed_angle_deg` of
+  /// `bed_direction_lps`.
+  std::function<double(const Eigen::Vector3d&)> liver_bed_score;
+  std::string liver_bed_source;
 };
 
 struct SolverFace {

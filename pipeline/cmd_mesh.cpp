@@ -6,6 +6,7 @@
 #include "meshing/mesh.h"
 #include "physics/materials/presets.h"
 #include "pipeline/commands.h"
+#include "pipeline/guide_stage.h"
 #include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/case_file.h"
@@ -36,6 +37,7 @@ struct MeshFlags {
   double gallbladder_wall_mm = 0.0, trachea_wall_mm = 0.0;  // 0 = the organ registry's
   bool no_tets = false, allow_failures = false;
   bool material_band = false;
+  double max_fold_deg = -1.0;  // < 0 = not given: 60, or the run's [stages.mesh] max_fold_deg
 };
 
 std::vector<std::string> split(const std::string& s, char sep) {
@@ -97,6 +99,7 @@ int continue_run(const MeshFlags& f) {
   if (f.ras) m.ras = true;
   if (f.no_tets) m.tetrahedra = false;
   if (f.material_band) m.material_band = true;
+  if (f.max_fold_deg >= 0) m.max_fold_deg = f.max_fold_deg;
   if (f.gallbladder_wall_mm > 0) m.wall_mm["gallbladder"] = f.gallbladder_wall_mm;
   if (f.trachea_wall_mm > 0) m.wall_mm["trachea"] = f.trachea_wall_mm;
   m.quality_gate = f.allow_failures ? "report" : "enforce";
@@ -128,6 +131,7 @@ int run_mesh(const MeshFlags& f) {
   options.organs = organ_specs(f);
   options.tetrahedra = !f.no_tets;
   options.enforce_quality = !f.allow_failures;
+  if (f.max_fold_deg >= 0) options.max_fold_deg = f.max_fold_deg;
   ExportOptions eo;
   if (!f.formats.empty()) eo.formats = split(f.formats, ',');
   eo.ras = f.ras;
@@ -156,6 +160,17 @@ int run_mesh(const MeshFlags& f) {
   progress.finish();
   for (const auto& w : meshes.warnings) spdlog::warn("{}", w);
 
+  // The gallbladder's liver bed (its fixed set) from the label map's liver label where it has
+  // one, else the liver's usual direction (no CT here; `run` also looks in the CT).
+  if (const OrganInfo* gb = builtin_organ_registry().find("gallbladder"))
+    for (const auto& organ : meshes.organs)
+      if (organ.spec.name == gb->name && organ.spec.model == OrganModel::wall_body && !organ.volume.tets.empty()) {
+        GuideInputs in;
+        in.labels = &labels;
+        const LiverBedForSolver bed = liver_bed_for_solver(organ.surfaces.front().mesh, in, {}, builtin_organ_registry());
+        eo.boundaries.liver_bed_score = bed.score;
+        eo.boundaries.liver_bed_source = bed.source;
+      }
   const fs::path final_dir = out.path();
   std::vector<std::string> warnings;
   out.commit("mesh", [&](const fs::path& staging) { export_meshes(meshes, staging, eo, &warnings); });
@@ -204,6 +219,10 @@ std::vector<Command> meshing_commands(CLI::App& app) {
       ->check(CLI::PositiveNumber);
   sub->add_option("--trachea-wall-mm", flags->trachea_wall_mm, "trachea wall thickness in mm (default: the organ registry's, 2.5)")
       ->check(CLI::PositiveNumber);
+  sub->add_option("--max-fold-deg", flags->max_fold_deg,
+                  "fold gate of an organ's uncut outer surface (gallbladder): largest angle between neighbouring triangles,\n"
+                  "deg; a mesh failing it is remeshed smoother (default 60; 0 = off)")
+      ->check(CLI::Range(0.0, 180.0));
   sub->add_flag("--no-tets", flags->no_tets, "surfaces only (no tetrahedral meshes)");
   sub->add_flag("--material-band", flags->material_band,
                 "also write each organ's INP with the P5/P50/P95 variants of its materials, from the spread of\n"

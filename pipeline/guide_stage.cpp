@@ -11,6 +11,7 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <memory>
 
 namespace organsmith {
 
@@ -45,6 +46,49 @@ GuideFiles read_guide_inputs(const fs::path& out_dir, bool ras) {
   return f;
 }
 
+namespace {
+
+/// The liver label map the bed is taken from (the label map's own, else the phantom's ground
+/// truth's), with the options' liver label set from the registry; null when neither holds one.
+const LabelMap* liver_labels(const GuideInputs& in, const OrganRegistry& registry, physics::DissectionOptions& dopt) {
+  const OrganInfo* liver_info = registry.find("liver");
+  if (!liver_info) return nullptr;
+  dopt.liver_label = liver_info->label;
+  // The phantom's ground truth is in the same patient frame (LPS mm); its grid may differ.
+  if (in.labels && in.labels->count(dopt.liver_label) > 0) return in.labels;
+  if (in.truth && in.truth->count(dopt.liver_label) > 0) return in.truth;
+  return nullptr;
+}
+
+}  // namespace
+
+LiverBedForSolver liver_bed_for_solver(const SurfaceMesh& gb, const GuideInputs& in, const GuideStageOptions& options,
+                                       const OrganRegistry& registry) {
+  physics::DissectionOptions dopt = options.dissection;
+  const LabelMap* liver = liver_labels(in, registry, dopt);
+  const Volume* ct = !liver && dopt.bed_from_ct && in.ct ? in.ct() : nullptr;
+  physics::LiverBedScore bed = physics::liver_bed_score(gb, liver, dopt, ct);
+  auto index = std::make_shared<physics::SurfaceIndex>(std::vector<SurfaceMesh>{gb});
+  auto score = std::make_shared<std::vector<double>>(std::move(bed.vertex_score));
+  LiverBedForSolver out;
+  out.source = bed.source;
+  out.score = [index, score](const Eigen::Vector3d& q) {
+    const physics::ClosestPoint c = index->closest(q);
+    if (!c.found) return 0.0;
+    const SurfaceMesh& m = index->surface(0);
+    const auto& t = m.triangles[std::size_t(c.triangle)];
+    const Eigen::Vector3d &a = m.vertices_lps_mm[std::size_t(t[0])], &b = m.vertices_lps_mm[std::size_t(t[1])],
+                          &d = m.vertices_lps_mm[std::size_t(t[2])];
+    // Barycentric weights of the closest point (on the triangle).
+    const Eigen::Vector3d n = (b - a).cross(d - a);
+    const double n2 = n.squaredNorm();
+    if (n2 <= 0) return (*score)[std::size_t(t[0])];
+    const double wb = (c.point_lps_mm - a).cross(d - a).dot(n) / n2, wd = (b - a).cross(c.point_lps_mm - a).dot(n) / n2;
+    return (1 - wb - wd) * (*score)[std::size_t(t[0])] + wb * (*score)[std::size_t(t[1])] + wd * (*score)[std::size_t(t[2])];
+  };
+  return out;
+}
+
 std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::path& dest_dir,
                                               const GuideStageOptions& options, const OrganRegistry& registry) {
   for (const auto& n : options.only)
@@ -67,7 +111,6 @@ std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::p
   // The paths belong to two organs of the registry; an organ a registry lacks has no paths.
   const OrganInfo* trachea = registry.find("trachea");
   const OrganInfo* gallbladder = registry.find("gallbladder");
-  const OrganInfo* liver_info = registry.find("liver");
   const bool want_centerline = trachea && wanted("trachea_centerline", trachea->label);
   const bool want_incision = trachea && wanted("trachea_incision", trachea->label);
   if (want_centerline || want_incision) {
@@ -93,13 +136,7 @@ std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::p
   if (gallbladder && wanted("gallbladder_dissection", gallbladder->label)) {
     const SurfaceMesh gb = in.surface(gallbladder->name, gallbladder->surfaces().front());
     physics::DissectionOptions dopt = options.dissection;
-    const LabelMap* liver = nullptr;
-    if (liver_info) {
-      dopt.liver_label = liver_info->label;
-      // The phantom's ground truth is in the same patient frame (LPS mm); its grid may differ.
-      if (labels.count(dopt.liver_label) > 0) liver = &labels;
-      else if (in.truth && in.truth->count(dopt.liver_label) > 0) liver = in.truth;
-    }
+    const LabelMap* liver = liver_labels(in, registry, dopt);
     const Volume* ct = nullptr;
     if (!liver && dopt.bed_from_ct && in.ct) ct = in.ct();
     const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, dopt, ct);

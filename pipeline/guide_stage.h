@@ -54,6 +54,18 @@ GuideFiles read_guide_inputs(const std::filesystem::path& out_dir, bool ras = fa
 /// Makes the built-in paths `options` asks for (all whose organ the label map holds by default),
 /// writes <name>.json and <name>.vtp per path into `dest_dir` (created) and returns the file names.
 /// The trachea's and the liver's labels and the organs' surface names come from `registry`.
+/// The gallbladder's liver bed as the solver model's fixed set takes it, by the same rule as the
+/// dissection path (`physics::liver_bed_score`: the liver label of the label map or of the
+/// phantom's ground truth, else the CT, else the liver's usual direction): the score at the point
+/// of `gallbladder_surface` nearest to a query point (interpolated over its triangle), and the
+/// source in words. The solver model and the guide stage so fix the organ where the path cuts.
+struct LiverBedForSolver {
+  std::function<double(const Eigen::Vector3d&)> score;
+  std::string source;
+};
+LiverBedForSolver liver_bed_for_solver(const SurfaceMesh& gallbladder_surface, const GuideInputs& inputs,
+                                       const GuideStageOptions& options, const OrganRegistry& registry);
+
 std::vector<std::string> write_guidance_paths(const GuideInputs& inputs, const std::filesystem::path& dest_dir,
                                               const GuideStageOptions& options, const OrganRegistry& registry);
 

@@ -219,7 +219,9 @@ class Runner {
       const nlohmann::json mesh_opts = stage_json(case_, "mesh");
       // The solver files carry each region's fitted material, so the materials are part of the mesh
       // stage's fingerprint.
+      // The gallbladder's fixed liver bed follows the guide stage's bed options and the CT.
       execute({"mesh", fingerprint("mesh", mesh_opts.dump() + registry_digest() + materials_json().dump() +
+                                               stage_json(case_, "guide").dump() + outputs_digest("ingest") +
                                                outputs_digest("segment")),
                [&](const fs::path& staging) { write_meshes(staging); }});
       execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
@@ -254,6 +256,7 @@ class Runner {
     for (const auto& o : case_.organs) options.organs.push_back(mesh_spec(case_.registry.at(o.name), mo.wall_mm));
     options.edge_mm = mo.edge_mm;
     options.tetrahedra = mo.tetrahedra;
+    options.max_fold_deg = mo.max_fold_deg;
     // "enforce" (the default): a figure still failing after the remedies stops the run (exit 61);
     // "report": it is a warning and quality.json records it.
     options.enforce_quality = mo.quality_gate == "enforce";
@@ -287,6 +290,21 @@ class Runner {
       if (const auto it = mo.pressure_kPa.find(spec.name); it != mo.pressure_kPa.end()) sc.pressure_kPa = it->second;
       ex.scenarios[spec.name] = sc;
     }
+    // The gallbladder's liver bed (its fixed set) by the guide stage's rule: a liver label, else
+    // the CT, else the liver's usual direction.
+    if (const OrganInfo* gb = case_.registry.find("gallbladder"))
+      for (const auto& organ : meshes.organs)
+        if (organ.spec.name == gb->name && organ.spec.model == OrganModel::wall_body && !organ.volume.tets.empty()) {
+          std::optional<LabelMap> truth;
+          GuideInputs in;
+          in.labels = &labels;
+          if (fs::exists(layout_.phantom_truth())) in.truth = &truth.emplace(read_label_map(layout_.phantom_truth()));
+          in.ct = [this]() -> const Volume* { return &volume(); };
+          const LiverBedForSolver bed = liver_bed_for_solver(organ.surfaces.front().mesh, in, case_.stages.guide, case_.registry);
+          ex.boundaries.liver_bed_score = bed.score;
+          ex.boundaries.liver_bed_source = bed.source;
+          spdlog::info("mesh: {} liver bed (fixed in its load case) from the {}", gb->name, bed.source);
+        }
     std::vector<std::string> warnings;
     const OutputLayout staged{staging};
     fs::create_directories(staged.meshes_dir());

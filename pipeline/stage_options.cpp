@@ -54,6 +54,8 @@ void visit(Visitor& v, MeshStageOptions& o) {
   v.boolean("linear_tets", o.linear_tets, "linear tetrahedra (C3D4/tet4) instead of quadratic (C3D10/tet10)");
   v.per_organ("pressure_kPa", o.pressure_kPa, 0.0, 100.0, "kPa",
               "lumen pressure of the organ's load step, e.g. { trachea = 1.0 }; {} = gallbladder 1.5, trachea 2.0");
+  v.number("max_fold_deg", o.max_fold_deg, 0.0, 180.0, "deg",
+           "fold gate of an organ's uncut outer surface: largest angle between neighbouring triangles; 0 = off");
   v.boolean("material_band", o.material_band,
             "also write each organ's INP with the P5/P50/P95 variants of its materials (meshes/<organ>/band/)");
 }

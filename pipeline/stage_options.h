@@ -36,6 +36,10 @@ struct MeshStageOptions {
   /// (meshes/<organ>/band/<organ>.p05.inp, …; physics/materials/material_band.h), and the band in
   /// materials.json (default false).
   bool material_band = false;
+  /// Fold gate of an organ's outer surface without cut faces: largest angle between neighbouring
+  /// triangles, deg (default 60; 0 = off). A mesh failing it is remeshed smoother (meshing's
+  /// remedies); see meshing/README.md.
+  double max_fold_deg = 60.0;
   MeshStageOptions();
 };
 

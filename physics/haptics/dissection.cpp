@@ -1,7 +1,8 @@
 // Over 400 lines: the liver bed found in the CT (crop, smoothing, intensity survey, opening,
 // connected region, probes) and the dissection path (bed score from any source, smoothing over
 // the surface, the iso-line, its checks) are one method in two halves sharing the surface's
-// vertex normals and score field; split them when a second user of the CT bed appears.
+// vertex normals and score field. Its second user (the solver model's fixed liver bed) takes the
+// score through `liver_bed_score`, so the two agree on where the bed is.
 #include "physics/haptics/dissection.h"
 
 #include "core/errors.h"
@@ -346,16 +347,14 @@ double positive_area(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const E
 
 }  // namespace
 
-DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap* liver, const DissectionOptions& o,
-                                           const Volume* ct) {
+LiverBedScore liver_bed_score(const SurfaceMesh& gb, const LabelMap* liver, const DissectionOptions& o, const Volume* ct) {
   const auto& V = gb.vertices_lps_mm;
-  if (gb.triangles.empty()) throw InputError(ExitCode::mesh_input, "the gallbladder surface has no triangle", {});
-  DissectionPath out;
+  LiverBedScore out;
   std::vector<double> score;
   std::string why_not;  // why the label or the CT could not give the bed
   if (liver && liver->count(o.liver_label) > 0) {
     score = score_from_label(gb, *liver, o);
-    if (std::find(score.begin(), score.end(), 1.0) != score.end()) out.bed_source = "liver label";
+    if (std::find(score.begin(), score.end(), 1.0) != score.end()) out.source = "liver label";
     else {
       score.clear();
       why_not = "the liver label does not touch the gallbladder";
@@ -366,7 +365,7 @@ DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap
     const LiverBedEstimate& e = out.ct_estimate;
     if (e.reason.empty() && std::any_of(e.score.begin(), e.score.end(), [](double s) { return s >= 0.5; })) {
       score = e.score;
-      out.bed_source = "CT intensity";
+      out.source = "CT intensity";
     } else {
       if (!why_not.empty()) why_not += "; ";
       why_not += e.reason.empty() ? "no parenchyma of " + format_g(std::round(e.band_lo_hu)) + "–" +
@@ -375,7 +374,7 @@ DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap
     }
   }
   if (score.empty()) {
-    out.bed_source = "surface facing the liver direction" + (why_not.empty() ? "" : " (" + why_not + ")");
+    out.source = "surface facing the liver direction" + (why_not.empty() ? "" : " (" + why_not + ")");
     const std::vector<Eigen::Vector3d> n = vertex_normals(gb);
     const Eigen::Vector3d dir = o.bed_direction_lps.normalized();
     const double c = std::cos(o.bed_angle_deg * std::numbers::pi / 180.0);
@@ -411,6 +410,19 @@ DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap
     }
     std::swap(score, next);
   }
+  out.vertex_score = std::move(score);
+  return out;
+}
+
+DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap* liver, const DissectionOptions& o,
+                                           const Volume* ct) {
+  const auto& V = gb.vertices_lps_mm;
+  if (gb.triangles.empty()) throw InputError(ExitCode::mesh_input, "the gallbladder surface has no triangle", {});
+  DissectionPath out;
+  LiverBedScore bed = liver_bed_score(gb, liver, o, ct);
+  out.bed_source = std::move(bed.source);
+  out.ct_estimate = std::move(bed.ct_estimate);
+  const std::vector<double>& score = bed.vertex_score;
   out.vertex_score = score;
   // f ≥ 0 is the bed; no vertex exactly on the iso-value.
   std::vector<double> f(score.size());

@@ -100,6 +100,21 @@ struct DissectionPath {
   LiverBedEstimate ct_estimate;   ///< the CT's figures when the bed came from (or was tried in) the CT
 };
 
+/// The liver bed on the gallbladder surface, per vertex: the score in [0, 1] (the bed is ≥ 0.5)
+/// and where it came from. One rule for every user of the bed (the dissection path, the solver
+/// model's fixed set): liver voxels of `liver`'s liver label within bed_distance_mm; else
+/// `liver_bed_from_ct` on `ct`; else facing bed_direction_lps; smoothed over the surface
+/// (σ = smoothing_mm).
+struct LiverBedScore {
+  std::vector<double> vertex_score;
+  /// "liver label", "CT intensity", or "surface facing the liver direction" (with the reason why
+  /// neither the label nor the CT could be used, when one was given).
+  std::string source;
+  LiverBedEstimate ct_estimate;   ///< the CT's figures when the bed came from (or was tried in) the CT
+};
+LiverBedScore liver_bed_score(const SurfaceMesh& gallbladder, const LabelMap* liver, const DissectionOptions& options = {},
+                              const Volume* ct = nullptr);
+
 /// The curve where the gallbladder wall meets the liver bed. Each vertex of the (closed,
 /// outward-oriented) gallbladder surface gets a bed score in [0, 1] — liver voxels of `liver`'s
 /// liver label within bed_distance_mm; else `liver_bed_from_ct` on `ct`; else facing
