@@ -219,10 +219,12 @@ class Runner {
       const nlohmann::json mesh_opts = stage_json(case_, "mesh");
       // The solver files carry each region's fitted material, so the materials are part of the mesh
       // stage's fingerprint.
-      // The gallbladder's fixed liver bed follows the guide stage's bed options and the CT.
+      // The gallbladder's fixed liver bed follows the guide stage's bed options (only those) and
+      // the CT.
+      const auto& bed = case_.stages.guide.dissection;
+      const nlohmann::json bed_opts = {{"bed_from_ct", bed.bed_from_ct}, {"bed_distance_mm", bed.bed_distance_mm}};
       execute({"mesh", fingerprint("mesh", mesh_opts.dump() + registry_digest() + materials_json().dump() +
-                                               stage_json(case_, "guide").dump() + outputs_digest("ingest") +
-                                               outputs_digest("segment")),
+                                               bed_opts.dump() + outputs_digest("ingest") + outputs_digest("segment")),
                [&](const fs::path& staging) { write_meshes(staging); }});
       execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
                [&](const fs::path& staging) {
