@@ -53,8 +53,10 @@ struct MeshOptions {
   double max_radius_edge = 2.0;      ///< quality gate: every tet's circumradius / shortest edge
   /// Quality gate of an organ's own closed boundary without cut faces (not tubes, not inner
   /// walls): the largest fold between neighbouring triangles (deg; 0 = not checked). See
-  /// SurfaceGuarantees::max_fold_deg.
-  double max_fold_deg = 60.0;
+  /// SurfaceGuarantees::max_fold_deg. Off by default: on GVF-segmented real gallbladders the
+  /// outer surface folds by 92–152° at a 1.5 mm edge and the remedies do not remove it (see
+  /// meshing/README.md); 60 suits reference masks and solver meshes on coarse scans.
+  double max_fold_deg = 0.0;
   bool enforce_quality = true;       ///< throw MeshQualityError when a gate fails (else only report)
   int quality_remedies = 3;          ///< an organ failing a gate is meshed again this many times at most: smoother, finer, both
   bool skip_absent = true;           ///< an organ absent from the label map is skipped with a warning

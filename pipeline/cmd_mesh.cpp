@@ -37,7 +37,7 @@ struct MeshFlags {
   double gallbladder_wall_mm = 0.0, trachea_wall_mm = 0.0;  // 0 = the organ registry's
   bool no_tets = false, allow_failures = false;
   bool material_band = false;
-  double max_fold_deg = -1.0;  // < 0 = not given: 60, or the run's [stages.mesh] max_fold_deg
+  double max_fold_deg = -1.0;  // < 0 = not given: off, or the run's [stages.mesh] max_fold_deg
 };
 
 std::vector<std::string> split(const std::string& s, char sep) {
@@ -221,7 +221,7 @@ std::vector<Command> meshing_commands(CLI::App& app) {
       ->check(CLI::PositiveNumber);
   sub->add_option("--max-fold-deg", flags->max_fold_deg,
                   "fold gate of an organ's uncut outer surface (gallbladder): largest angle between neighbouring triangles,\n"
-                  "deg; a mesh failing it is remeshed smoother (default 60; 0 = off)")
+                  "deg; a mesh failing it is remeshed smoother (default 0 = off; 60 for solver meshes on coarse scans)")
       ->check(CLI::Range(0.0, 180.0));
   sub->add_flag("--no-tets", flags->no_tets, "surfaces only (no tetrahedral meshes)");
   sub->add_flag("--material-band", flags->material_band,
