@@ -3,11 +3,11 @@
 // its face diagonals) and a subdivided icosahedron on a sphere (fold ≈ edge / radius in radians).
 
 #include "meshing/quality.h"
+#include "tests/physics/synthetic_meshes.h"
 
 #include <gtest/gtest.h>
 
 #include <cmath>
-#include <map>
 
 using namespace organsmith;
 
@@ -22,33 +22,10 @@ SurfaceMesh cube(double side_mm) {
   return m;
 }
 
-/// An icosahedron subdivided `levels` times, projected onto the sphere of radius r.
+/// An icosahedron subdivided `levels` times, on the sphere of radius r.
 SurfaceMesh icosphere(double r, int levels) {
-  const double t = (1 + std::sqrt(5.0)) / 2;
-  SurfaceMesh m;
-  for (auto [x, y, z] : std::vector<std::array<double, 3>>{{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
-                                                          {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}})
-    m.vertices_lps_mm.push_back(r * Eigen::Vector3d(x, y, z).normalized());
-  m.triangles = {{0, 11, 5}, {0, 5, 1}, {0, 1, 7}, {0, 7, 10}, {0, 10, 11}, {1, 5, 9}, {5, 11, 4}, {11, 10, 2}, {10, 7, 6}, {7, 1, 8},
-                 {3, 9, 4}, {3, 4, 2}, {3, 2, 6}, {3, 6, 8}, {3, 8, 9}, {4, 9, 5}, {2, 4, 11}, {6, 2, 10}, {8, 6, 7}, {9, 8, 1}};
-  for (int l = 0; l < levels; ++l) {
-    std::map<std::pair<int, int>, int> mid;
-    auto middle = [&](int a, int b) {
-      const auto key = std::minmax(a, b);
-      if (auto it = mid.find(key); it != mid.end()) return it->second;
-      m.vertices_lps_mm.push_back(r * (m.vertices_lps_mm[a] + m.vertices_lps_mm[b]).normalized());
-      return mid[key] = int(m.vertices_lps_mm.size()) - 1;
-    };
-    std::vector<std::array<std::int32_t, 3>> next;
-    for (const auto& f : m.triangles) {
-      const int a = middle(f[0], f[1]), b = middle(f[1], f[2]), c = middle(f[2], f[0]);
-      next.push_back({f[0], a, c});
-      next.push_back({f[1], b, a});
-      next.push_back({f[2], c, b});
-      next.push_back({a, b, c});
-    }
-    m.triangles = next;
-  }
+  SurfaceMesh m = organsmith::physics::testing::unit_icosphere(levels);
+  for (auto& v : m.vertices_lps_mm) v *= r;
   return m;
 }
 
