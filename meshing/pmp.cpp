@@ -48,12 +48,45 @@ using E = Mesh::Edge_index;
 using H = Mesh::Halfedge_index;
 
 Mesh to_cgal(const SurfaceMesh& s) {
+  // Points closer than kWeldMm are one point: a flat cut computes the same intersection twice
+  // with round-off (1e-14 mm apart), and such a zero-length edge survives remeshing (it lies on
+  // a protected rim) and sends the tetrahedral mesher's feature protection off the mesh.
+  constexpr double kWeldMm = 1e-6;
+  std::vector<std::size_t> weld(s.vertices_lps_mm.size());
   std::vector<Point> points;
   points.reserve(s.vertices_lps_mm.size());
-  for (const auto& p : s.vertices_lps_mm) points.emplace_back(p.x(), p.y(), p.z());
-  std::vector<std::array<std::size_t, 3>> polys;
+  {
+    std::map<std::array<std::int64_t, 3>, std::vector<std::size_t>> cells;  // cell -> point indices
+    auto cell_of = [&](const Eigen::Vector3d& q) {
+      return std::array<std::int64_t, 3>{std::int64_t(std::floor(q.x() / kWeldMm)), std::int64_t(std::floor(q.y() / kWeldMm)),
+                                         std::int64_t(std::floor(q.z() / kWeldMm))};
+    };
+    for (std::size_t i = 0; i < s.vertices_lps_mm.size(); ++i) {
+      const Eigen::Vector3d& q = s.vertices_lps_mm[i];
+      const auto c = cell_of(q);
+      std::size_t found = points.size();
+      for (int dx = -1; dx <= 1 && found == points.size(); ++dx)
+        for (int dy = -1; dy <= 1 && found == points.size(); ++dy)
+          for (int dz = -1; dz <= 1 && found == points.size(); ++dz) {
+            const auto it = cells.find({c[0] + dx, c[1] + dy, c[2] + dz});
+            if (it == cells.end()) continue;
+            for (std::size_t j : it->second)
+              if (CGAL::squared_distance(points[j], Point(q.x(), q.y(), q.z())) <= kWeldMm * kWeldMm) {
+                found = j;
+                break;
+              }
+          }
+      if (found == points.size()) {
+        points.emplace_back(q.x(), q.y(), q.z());
+        cells[c].push_back(found);
+      }
+      weld[i] = found;
+    }
+  }
+  // Resizable polygons: CGAL's soup repair then also drops triangles left with a repeated point.
+  std::vector<std::vector<std::size_t>> polys;
   polys.reserve(s.triangles.size());
-  for (const auto& t : s.triangles) polys.push_back({std::size_t(t[0]), std::size_t(t[1]), std::size_t(t[2])});
+  for (const auto& t : s.triangles) polys.push_back({weld[std::size_t(t[0])], weld[std::size_t(t[1])], weld[std::size_t(t[2])]});
   PMP::repair_polygon_soup(points, polys);
   PMP::orient_polygon_soup(points, polys);  // duplicates non-manifold vertices if any
   Mesh m;
@@ -537,16 +570,42 @@ SurfaceMesh tube_wall_from_surfaces(const SurfaceMesh& outer, const SurfaceMesh&
       "check the label map (a mask a few voxels thin cannot be closed), or try another edge length (--edge-mm, [stages.mesh] edge_mm)");
   clock.done("join: soup and annuli");
   auto cap = m.add_property_map<F, bool>("f:cap", false).first;
-  std::vector<F> caps;
-  for (F f : m.faces()) {
-    int plane = -2;
-    for (V v : CGAL::vertices_around_face(m.halfedge(f), m)) {
-      const Point& q = m.point(v);
-      const int pl = on_plane(Eigen::Vector3d(q.x(), q.y(), q.z()));
-      plane = plane == -2 || plane == pl ? pl : -1;
+  auto find_caps = [&] {
+    std::vector<F> found;
+    for (F f : m.faces()) {
+      int plane = -2;
+      for (V v : CGAL::vertices_around_face(m.halfedge(f), m)) {
+        const Point& q = m.point(v);
+        const int pl = on_plane(Eigen::Vector3d(q.x(), q.y(), q.z()));
+        plane = plane == -2 || plane == pl ? pl : -1;
+      }
+      cap[f] = plane >= 0;
+      if (cap[f]) found.push_back(f);
     }
-    if (plane >= 0) cap[f] = true, caps.push_back(f);
+    return found;
+  };
+  std::vector<F> caps = find_caps();
+  auto is_rim = [&](E e) {
+    const H h = m.halfedge(e);
+    return cap[m.face(h)] != cap[m.face(m.opposite(h))];
+  };
+  // The rims stay as they are (protected), and CGAL's remesher requires protected edges no longer
+  // than 4/3 of the target: split longer rim edges first. A split point lies on the straight rim
+  // edge, so the caps stay flat and the wall keeps its shape; the faces either side are split in two.
+  auto rim = m.add_property_map<E, bool>("e:rim", false).first;
+  std::vector<E> long_rims;
+  for (E e : m.edges()) {
+    rim[e] = is_rim(e);
+    if (rim[e] && std::sqrt(CGAL::squared_distance(m.point(m.vertex(e, 0)), m.point(m.vertex(e, 1)))) >
+                      1.25 * p.target_edge_mm)
+      long_rims.push_back(e);
   }
+  if (!long_rims.empty()) {
+    PMP::split_long_edges(long_rims, 1.25 * p.target_edge_mm, m, CGAL::parameters::edge_is_constrained_map(rim));
+    caps = find_caps();
+    for (E e : m.edges()) rim[e] = is_rim(e);
+  }
+  // Angle improvement afterwards must not touch the tubes: every edge not inside a cap is fixed.
   auto constrained = m.add_property_map<E, bool>("e:constrained", false).first;
   for (E e : m.edges()) {
     const H h = m.halfedge(e);
@@ -554,8 +613,9 @@ SurfaceMesh tube_wall_from_surfaces(const SurfaceMesh& outer, const SurfaceMesh&
   }
   PMP::isotropic_remeshing(caps, p.target_edge_mm, m,
                            CGAL::parameters::number_of_iterations(p.iterations)
-                               .edge_is_constrained_map(constrained)
+                               .edge_is_constrained_map(rim)
                                .protect_constraints(true));
+  m.remove_property_map(rim);
   m.collect_garbage();
   clock.done("join: cap remeshing");
   improve_angles(m, p.min_angle_deg, p.target_edge_mm, true);
