@@ -31,14 +31,15 @@ test: build
 # of everything that reads untrusted input — ingest of every format, case files, TOML, CSV,
 # segmentation, label-map checks before meshing, and the corpus suite, whose 412 hostile inputs
 # go through the instrumented CLI; and the meshing tests that reach CGAL's preconditions (asserts
-# are on in this build: flat cuts, the tube-wall join, the label touching the border). CGAL's own code is left uninstrumented (meshing/CMakeLists.txt).
+# are on in this build: flat cuts, the tube-wall join, the label touching the border; of the
+# phantom's six, the trachea's: each meshes the phantom, ≈ 50 s under ASan). CGAL's own code is left uninstrumented (meshing/CMakeLists.txt).
 # With -g, ccache would key each object on the checkout's path: CCACHE_NOHASHDIR lets a fresh
 # clone reuse what another one compiled (reports print the relative source paths either way).
 SAN_DIR ?= build-asan
 SAN_TARGETS = organsmith test_core test_pipeline test_corpus test_physics test_segmentation test_meshing
 # Left out: BadInputs.InterruptAndKillMidRunThenRerun (its full run draws snapshots through Mesa
 # under Xvfb; the driver, unloaded at exit, leaves 112 bytes that LeakSanitizer cannot attribute).
-SAN_TESTS ?= ^(ImageGrid|LabelMap|Sha256|Csv|TomlParse|PhysicsCsv|Ingest|IngestReal|IngestErrors|CaseFile|OutputDir|NiftiCheck|DicomStructure|TextHeaders|BadInputs\.(CaseFile|MeshOptions|ADevice)|Corpus|Gvf|Snake|SegmentPhantom|SegmentBadInput|SegmentReal|SegmentSweep|MeshingDeterminism|MeshingBadInput|TubeWall|PhantomMeshes)\.
+SAN_TESTS ?= ^(ImageGrid|LabelMap|Sha256|Csv|TomlParse|PhysicsCsv|Ingest|IngestReal|IngestErrors|CaseFile|OutputDir|NiftiCheck|DicomStructure|TextHeaders|BadInputs\.(CaseFile|MeshOptions|ADevice)|Corpus|Gvf|Snake|SegmentPhantom|SegmentBadInput|SegmentReal|SegmentSweep|MeshingDeterminism|MeshingBadInput|TubeWall)\.|^PhantomMeshes\.TracheaIsATube
 sanitize: deps
 	@cmake -S . -B $(SAN_DIR) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" \
 	  -DCMAKE_C_FLAGS_RELWITHDEBINFO="-O1 -g" -DORGANSMITH_SANITIZE=ON > $(SAN_DIR).configure.log 2>&1 \
