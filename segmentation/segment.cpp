@@ -363,6 +363,15 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     p.region_sigma_px = std::max(p.region_sigma_px,
                                  std::min(noise_hu / (2.0 * std::sqrt(M_PI) * p.region_noise_hu),
                                           p.region_noise_max_sigma_mm / std::min(c.sx, c.sy)));
+  // Where that smoothing is capped (coarse pixels, a noisy scan) noise is left; the window must
+  // then be wider than it, or the organ's own pixels fall outside by noise alone and the balloon
+  // turns inwards. At 2.33 σ of what is left, one inside pixel in a hundred does (one-sided).
+  if (noise_hu > 0) {
+    const double sigma_px = std::max(p.region_sigma_mm / std::min(c.sx, c.sy), p.region_sigma_px);
+    const double left_hu = noise_hu / (2.0 * std::sqrt(M_PI) * std::max(sigma_px, 0.5));
+    p.region_above_hu = std::max(p.region_above_hu, 2.33 * left_hu);
+    p.region_below_hu = std::max(p.region_below_hu, 2.33 * left_hu);
+  }
   // What the seed's neighbourhood looks like decides the organ's window.
   const double seed_med = median_inside(c, k0, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24));
   if (!(seed_med >= p.seed_hu_lo && seed_med <= p.seed_hu_hi)) {
@@ -553,8 +562,11 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
 
   // The organ's median over every slice found is a steadier centre for the window than one
   // slice around the seed (seeds a slice apart gave windows 6 HU apart on a real scan); a
-  // second pass with it makes the result depend less on where the seed was placed.
-  {
+  // second pass with it makes the result depend less on where the seed was placed. The median
+  // of a pass depends on its window (a lower window leaves out the brighter rim), so this repeats
+  // until the centre moves by at most 1.5 HU (three passes at most).
+  for (int recentre = 0; recentre < 3; ++recentre) {
+    bool moved = false;
     std::vector<float> v;
     for (const auto& sc : at.all) {
       const float* sl = vol.slice(sc.k);
@@ -574,12 +586,13 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
             for (const auto& sc : a.all) v += std::abs(polygon_area(sc.pts));
             return v;
           };
-          if (volume(second) >= 0.5 * volume(at)) at = std::move(second);
+          if (volume(second) >= 0.5 * volume(at)) at = std::move(second), moved = true;
         } catch (const SegmentationError&) {
           // keep the first pass
         }
       }
     }
+    if (!moved) break;
   }
   const auto& all = at.all;
   const double lo = at.lo, hi = at.hi, mu = at.mu;

@@ -96,8 +96,6 @@ struct Short {
   double reached;
 };
 const std::vector<Short> kShortOfTarget = {
-    {"abdomen-ct-3mm", "gallbladder", "noise 20 HU", 0.636},
-    {"abdomen-ct-3mm", "gallbladder", "seed +5 mm S", 0.831},
     {"chest-dicom-8mm", "trachea", "0.7 mm slices", 0.937},
     {"chest-dicom-8mm", "trachea", "1.0 mm slices", 0.935},
     {"chest-dicom-8mm", "trachea", "2.0 mm slices", 0.939},
