@@ -33,6 +33,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <unordered_map>
 #include <stdexcept>
 
 namespace organsmith::meshing_detail {
@@ -56,7 +57,12 @@ Mesh to_cgal(const SurfaceMesh& s) {
   std::vector<Point> points;
   points.reserve(s.vertices_lps_mm.size());
   {
-    std::map<std::array<std::int64_t, 3>, std::vector<std::size_t>> cells;  // cell -> point indices
+    struct CellHash {
+      std::size_t operator()(const std::array<std::int64_t, 3>& c) const {
+        return std::hash<std::int64_t>()(c[0] * 73856093 ^ c[1] * 19349663 ^ c[2] * 83492791);
+      }
+    };
+    std::unordered_map<std::array<std::int64_t, 3>, std::vector<std::size_t>, CellHash> cells;  // cell -> points
     auto cell_of = [&](const Eigen::Vector3d& q) {
       return std::array<std::int64_t, 3>{std::int64_t(std::floor(q.x() / kWeldMm)), std::int64_t(std::floor(q.y() / kWeldMm)),
                                          std::int64_t(std::floor(q.z() / kWeldMm))};
