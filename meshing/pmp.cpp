@@ -48,47 +48,47 @@ using F = Mesh::Face_index;
 using E = Mesh::Edge_index;
 using H = Mesh::Halfedge_index;
 
+/// Welds points closer than `tol_mm` (to the first of them): `points` receives the kept points,
+/// the result maps each input index to its kept point.
+std::vector<std::size_t> weld_points(const std::vector<Eigen::Vector3d>& in, double tol_mm, std::vector<Point>& points) {
+  struct CellHash {
+    std::size_t operator()(const std::array<std::int64_t, 3>& c) const {
+      return std::hash<std::int64_t>()(c[0] * 73856093 ^ c[1] * 19349663 ^ c[2] * 83492791);
+    }
+  };
+  std::unordered_map<std::array<std::int64_t, 3>, std::vector<std::size_t>, CellHash> cells;  // cell -> kept points
+  std::vector<std::size_t> to_kept(in.size());
+  points.clear();
+  points.reserve(in.size());
+  for (std::size_t i = 0; i < in.size(); ++i) {
+    const Point q(in[i].x(), in[i].y(), in[i].z());
+    const std::array<std::int64_t, 3> c{std::int64_t(std::floor(q.x() / tol_mm)), std::int64_t(std::floor(q.y() / tol_mm)),
+                                        std::int64_t(std::floor(q.z() / tol_mm))};
+    std::size_t found = points.size();
+    for (int d = 0; d < 27 && found == points.size(); ++d) {
+      const auto it = cells.find({c[0] + d % 3 - 1, c[1] + d / 3 % 3 - 1, c[2] + d / 9 - 1});
+      if (it == cells.end()) continue;
+      for (std::size_t j : it->second)
+        if (CGAL::squared_distance(points[j], q) <= tol_mm * tol_mm) {
+          found = j;
+          break;
+        }
+    }
+    if (found == points.size()) {
+      points.push_back(q);
+      cells[c].push_back(found);
+    }
+    to_kept[i] = found;
+  }
+  return to_kept;
+}
+
 Mesh to_cgal(const SurfaceMesh& s) {
-  // Points closer than kWeldMm are one point: a flat cut computes the same intersection twice
+  // Points closer than 1e-6 mm are one point: a flat cut computes the same intersection twice
   // with round-off (1e-14 mm apart), and such a zero-length edge survives remeshing (it lies on
   // a protected rim) and sends the tetrahedral mesher's feature protection off the mesh.
-  constexpr double kWeldMm = 1e-6;
-  std::vector<std::size_t> weld(s.vertices_lps_mm.size());
   std::vector<Point> points;
-  points.reserve(s.vertices_lps_mm.size());
-  {
-    struct CellHash {
-      std::size_t operator()(const std::array<std::int64_t, 3>& c) const {
-        return std::hash<std::int64_t>()(c[0] * 73856093 ^ c[1] * 19349663 ^ c[2] * 83492791);
-      }
-    };
-    std::unordered_map<std::array<std::int64_t, 3>, std::vector<std::size_t>, CellHash> cells;  // cell -> points
-    auto cell_of = [&](const Eigen::Vector3d& q) {
-      return std::array<std::int64_t, 3>{std::int64_t(std::floor(q.x() / kWeldMm)), std::int64_t(std::floor(q.y() / kWeldMm)),
-                                         std::int64_t(std::floor(q.z() / kWeldMm))};
-    };
-    for (std::size_t i = 0; i < s.vertices_lps_mm.size(); ++i) {
-      const Eigen::Vector3d& q = s.vertices_lps_mm[i];
-      const auto c = cell_of(q);
-      std::size_t found = points.size();
-      for (int dx = -1; dx <= 1 && found == points.size(); ++dx)
-        for (int dy = -1; dy <= 1 && found == points.size(); ++dy)
-          for (int dz = -1; dz <= 1 && found == points.size(); ++dz) {
-            const auto it = cells.find({c[0] + dx, c[1] + dy, c[2] + dz});
-            if (it == cells.end()) continue;
-            for (std::size_t j : it->second)
-              if (CGAL::squared_distance(points[j], Point(q.x(), q.y(), q.z())) <= kWeldMm * kWeldMm) {
-                found = j;
-                break;
-              }
-          }
-      if (found == points.size()) {
-        points.emplace_back(q.x(), q.y(), q.z());
-        cells[c].push_back(found);
-      }
-      weld[i] = found;
-    }
-  }
+  const std::vector<std::size_t> weld = weld_points(s.vertices_lps_mm, 1e-6, points);
   // Resizable polygons: CGAL's soup repair then also drops triangles left with a repeated point.
   std::vector<std::vector<std::size_t>> polys;
   polys.reserve(s.triangles.size());

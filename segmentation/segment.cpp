@@ -147,6 +147,12 @@ std::vector<Point2> scaled(const std::vector<Point2>& p, double f) {
   return out;
 }
 
+/// The region test's smoothing (mm): at least region_sigma_px pixels, since the per-voxel noise
+/// the region test must average out is set by the voxel, while smoothing in mm moves the boundary.
+double region_sigma_mm(const OrganPreset& p, const SliceCtx& c) {
+  return std::max(p.region_sigma_mm, p.region_sigma_px * std::min(c.sx, c.sy));
+}
+
 struct Fit {
   std::vector<Point2> pts;  // slice mm
   double area_mm2 = 0;
@@ -178,9 +184,7 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
       g.u.px[i] *= s;
       g.v.px[i] *= s;
     }
-    // Region smoothing: at least region_sigma_px pixels, since the per-voxel noise the region
-    // test must average out is set by the voxel, while smoothing in mm moves the boundary.
-    const double region_sigma = std::max(p.region_sigma_mm, p.region_sigma_px * std::min(c.sx, c.sy));
+    const double region_sigma = region_sigma_mm(p, c);
     Image2f pr = seg::smooth_slice(hu.data(), r.w, r.h, c.sx, c.sy, region_sigma);
     const float ramp = float(p.pressure_ramp_hu);
     for (float& v : pr.px) v = std::clamp(std::min(v - float(lo), float(hi) - v) / ramp, -1.0f, 1.0f);
@@ -367,7 +371,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   // then be wider than it, or the organ's own pixels fall outside by noise alone and the balloon
   // turns inwards. At 2.33 σ of what is left, one inside pixel in a hundred does (one-sided).
   if (noise_hu > 0) {
-    const double sigma_px = std::max(p.region_sigma_mm / std::min(c.sx, c.sy), p.region_sigma_px);
+    const double sigma_px = region_sigma_mm(p, c) / std::min(c.sx, c.sy);
     const double left_hu = noise_hu / (2.0 * std::sqrt(M_PI) * std::max(sigma_px, 0.5));
     p.region_above_hu = std::max(p.region_above_hu, 2.33 * left_hu);
     p.region_below_hu = std::max(p.region_below_hu, 2.33 * left_hu);
@@ -431,7 +435,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     seg::Region3dOptions ro;
     ro.lo_hu = lo;
     ro.hi_hu = hi;
-    ro.sigma_mm = std::max(p.region_sigma_mm, p.region_sigma_px * std::min(c.sx, c.sy));
+    ro.sigma_mm = region_sigma_mm(p, c);
     ro.open_mm = std::max(p.region_open_mm, std::min(c.sx, c.sy));
     ro.half_width_mm = std::sqrt(p.max_area_mm2 / M_PI) + 20.0;
     ro.half_length_mm = p.max_length_mm;
@@ -604,7 +608,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   out.last_slice = all.back().k;
   char win[192];
   std::snprintf(win, sizeof win, "organ window %.0f to %.0f HU (median %.0f HU); noise %.0f HU, region smoothing %.2f px",
-                lo, hi, mu, noise_hu, std::max(p.region_sigma_mm / std::min(c.sx, c.sy), p.region_sigma_px));
+                lo, hi, mu, noise_hu, region_sigma_mm(p, c) / std::min(c.sx, c.sy));
   out.notes = {"towards k = 0: " + note_down, "towards k = " + std::to_string(K - 1) + ": " + note_up, win};
   if (k0 != k_seed)
     out.notes.push_back("started at slice " + std::to_string(k0) + ", " + std::to_string(std::llabs(k0 - k_seed)) +
