@@ -119,6 +119,10 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get(*t, organ, seen, "roi_margin_mm", p.roi_margin_mm);
     get(*t, organ, seen, "max_length_mm", p.max_length_mm);
     get(*t, organ, seen, "region_reach_mm", p.region_reach_mm);
+    get(*t, organ, seen, "continuity_margin_mm", p.continuity_margin_mm);
+    get(*t, organ, seen, "continuity_slope", p.continuity_slope);
+    get(*t, organ, seen, "max_held_in_a_row", p.max_held_in_a_row);
+    get(*t, organ, seen, "max_pinned_fraction", p.max_pinned_fraction);
     get(*t, organ, seen, "alpha", p.alpha);
     get(*t, organ, seen, "beta", p.beta);
     get(*t, organ, seen, "kappa", p.kappa);

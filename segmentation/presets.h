@@ -58,6 +58,12 @@ struct OrganPreset {
   double roi_margin_mm = 30;                  ///< margin of the per-slice working window, mm
   double max_length_mm = 140;                 ///< seeded organs: longest extent from the seed along the slices, mm
   double region_reach_mm = 3;                 ///< seeded organs: the 3-D region continues a slice where it lies within this of the previous contour, mm
+  /// Seeded organs: a slice whose section leaked is fitted again with the pressure held within
+  /// continuity_margin_mm + continuity_slope × the slice spacing of the previous section (moved
+  /// by the organ's drift); at most max_held_in_a_row such slices in a row (0 mm = never).
+  double continuity_margin_mm = 0, continuity_slope = 0;
+  int max_held_in_a_row = 1;
+  double max_pinned_fraction = 1.0;           ///< …and only where at most this fraction of the held contour rests on the reach's limit
   double alpha = 0.6, beta = 0.3, kappa = 0.4, balloon = 0.5;  ///< snake (see SnakeOptions)
   double point_spacing_mm = 1.5;
   double gvf_mu = 0.2;

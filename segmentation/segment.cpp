@@ -160,10 +160,39 @@ struct Fit {
   bool touches_roi = false;
 };
 
+/// Where a section may lie: within margin_mm of the polygon `around` (slice mm).
+struct Reach {
+  std::vector<Point2> around;
+  double margin_mm = 0;
+};
+
+/// Fraction of a contour's points (slice mm) held at the reach's limit: outside `around` and at
+/// least margin_mm − tol_mm from it. A section that continues the organ rests on its wall; one
+/// that fills the reach (past the organ's end) rests on the limit.
+double pinned_fraction(const std::vector<Point2>& pts, const Reach& reach, double tol_mm) {
+  if (pts.empty() || reach.around.size() < 3) return 0.0;
+  std::size_t pinned = 0;
+  const auto& a = reach.around;
+  for (const auto& q : pts) {
+    if (seg::point_in_polygon(a, q)) continue;
+    double d2 = 1e300;
+    for (std::size_t i = 0; i < a.size(); ++i) {
+      const Point2& u = a[i];
+      const Point2& v = a[(i + 1) % a.size()];
+      const double ex = v.x - u.x, ey = v.y - u.y, l2 = ex * ex + ey * ey;
+      const double t = l2 > 0 ? std::clamp(((q.x - u.x) * ex + (q.y - u.y) * ey) / l2, 0.0, 1.0) : 0.0;
+      const double dx = u.x + t * ex - q.x, dy = u.y + t * ey - q.y;
+      d2 = std::min(d2, dx * dx + dy * dy);
+    }
+    if (std::sqrt(d2) >= reach.margin_mm - tol_mm) ++pinned;
+  }
+  return double(pinned) / double(pts.size());
+}
+
 /// Runs the GVF snake of `p` on slice k from `init` (slice mm), with the region pressure
-/// positive for smoothed HU in [lo, hi].
+/// positive for smoothed HU in [lo, hi] (and, given `reach`, only within it).
 Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init, const OrganPreset& p, double lo,
-              double hi, double margin_mm, double open_mm) {
+              double hi, double margin_mm, double open_mm, const Reach* reach = nullptr) {
   Fit fit;
   for (int attempt = 0; attempt < 3; ++attempt) {
     const Roi r = roi_around(c, init, margin_mm);
@@ -205,6 +234,18 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
       const float inv = float(1.0 / p.edge_stop);
       for (std::size_t i = 0; i < pr.px.size(); ++i)
         if (pr.px[i] > 0) pr.px[i] /= 1.0f + f.px[i] * inv;
+    }
+    if (reach && reach->around.size() >= 3) {
+      // Beyond the reach the pressure pulls inwards.
+      cv::Mat allowed = cv::Mat::zeros(r.h, r.w, CV_8U);
+      seg::rasterise(to_px(c, reach->around, r.x0, r.y0), r.w, r.h,
+                     [&](int x, int y) { allowed.at<std::uint8_t>(y, x) = 255; });
+      const int rx = int(std::lround(reach->margin_mm / c.sx)), ry = int(std::lround(reach->margin_mm / c.sy));
+      if (rx > 0 || ry > 0)
+        cv::dilate(allowed, allowed, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * rx + 1, 2 * ry + 1}));
+      for (int y = 0; y < r.h; ++y)
+        for (int x = 0; x < r.w; ++x)
+          if (!allowed.at<std::uint8_t>(y, x)) pr(x, y) = -1.0f;
     }
     seg::SnakeForces forces{&g.u, &g.v, &pr, c.sx, c.sy};
     seg::SnakeOptions so;
@@ -397,6 +438,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   struct Attempt {
     std::vector<SliceContour> all;
     std::string note_up, note_down;
+    std::vector<std::int64_t> held;  // slices fitted again within the previous section's reach
     double lo = 0, hi = 0, mu = 0;
   };
   // One segmentation with the window centred on `mu` (refined on the seed slice when
@@ -442,9 +484,25 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     const seg::Region3d region = seg::grow_region3d(vol, std::llround(ijk.x()), std::llround(ijk.y()), k0, ro);
     std::vector<SliceContour> up, down;
     std::string note_up, note_down;
-    auto propagate = [&](int dir, std::vector<SliceContour>& acc, std::string& note) {
+    std::vector<std::int64_t> held_up, held_down;
+    auto propagate = [&](int dir, std::vector<SliceContour>& acc, std::string& note, std::vector<std::int64_t>& held_k) {
       std::vector<Point2> prev = f0.pts;
       double prev_area = f0.area_mm2;
+      // The organ's drift between slices (centroid of the last section less the one before).
+      Point2 drift{0, 0};
+      int held_in_a_row = 0;
+      std::vector<Point2> anchor;  // the last section found unaided, while the slice before was held
+      double anchor_area = 0;
+      auto stop = [&](const std::string& why) {
+        note = why;
+        if (held_in_a_row > 0 && !acc.empty() && !held_k.empty() && held_k.back() == acc.back().k) {
+          // The slice before was only held within reach and the organ does not go on after it:
+          // that slice lay past the organ's end, it was not a leak in the organ's middle.
+          note += "; slice " + std::to_string(acc.back().k) + " (held within reach) dropped";
+          acc.pop_back();
+          held_k.pop_back();
+        }
+      };
       // Areas of the slices behind, for the leak test over at least area_ratio_span_mm (thin slices
       // let a leak grow by a few per cent a slice, each step under the ratio).
       std::vector<double> areas{f0.area_mm2};
@@ -468,11 +526,20 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         }
         const double m_init = median_inside(c, k, init);
         if (!(m_init >= lo && m_init <= hi)) {
-          note = "stopped at slice " + std::to_string(k) + ": the region left the organ's HU window";
+          stop("stopped at slice " + std::to_string(k) + ": the region left the organ's HU window");
           return;
         }
         Fit f = fit_slice(c, k, init, p, lo, hi, p.roi_margin_mm, open_for(prev_area));
-        if (from_region &&
+        if (from_region && p.continuity_margin_mm > 0) {
+          // The region may have joined a neighbour (duodenum through a wall that noise hides); a
+          // start inside the previous section is tried too, and the section that continues the
+          // previous one more (more of its area within the shift tolerance of it) is kept.
+          Fit inside = fit_slice(c, k, scaled(prev, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area));
+          auto on_prev = [&](const Fit& x) {
+            return x.area_mm2 * (1.0 - area_outside(x.pts, prev, p.shift_tolerance_mm, c.sx, c.sy));
+          };
+          if (inside.area_mm2 >= p.min_area_mm2 && on_prev(inside) > on_prev(f)) f = std::move(inside);
+        } else if (from_region &&
             area_outside(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction) {
           // Started from the region's outline the snake slid onto another structure: start again
           // inside the previous section.
@@ -481,36 +548,77 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
               area_outside(again.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) <= p.max_shifted_fraction)
             f = std::move(again);
         }
-        if (f.area_mm2 < p.min_area_mm2) {
-          note = "stopped at slice " + std::to_string(k) + ": area collapsed";
-          return;
+        // Why this slice's section does not continue the organ (empty: it does); `leak` says the
+        // reason is a leak into a neighbour.
+        std::vector<Point2> moved_prev;
+        for (const auto& q : prev) moved_prev.push_back({q.x + drift.x, q.y + drift.y});
+        auto why_not = [&](const Fit& f, bool& leak) -> std::string {
+          leak = false;
+          const std::string at = "stopped at slice " + std::to_string(k) + ": ";
+          if (f.area_mm2 < p.min_area_mm2) return at + "area collapsed";
+          leak = true;
+          const double base_area = areas[areas.size() > span ? areas.size() - span : 0];
+          if (f.area_mm2 > p.max_area_mm2 || f.area_mm2 > p.max_area_ratio * prev_area ||
+              f.area_mm2 > p.max_area_ratio * base_area)
+            return at + "area jumped (leak into a neighbour)";
+          // A section that grows while much of it lies off the previous one is a neighbour joined
+          // in (a bowel loop beside a tapering fundus between thick slices), not the organ going on.
+          if (f.area_mm2 > p.shift_growth_ratio * prev_area &&
+              area_outside(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction)
+            return at + "the section grew off the previous one (leak into a neighbour)";
+          // With a continuity margin, a section that does not grow and lies mostly off the previous
+          // one (moved by the organ's drift) is a neighbour: the contour drifted onto bowel beside
+          // the organ where the organ tapers (growing sections are the test above).
+          if (p.continuity_margin_mm > 0 && f.area_mm2 <= prev_area &&
+              area_outside(f.pts, moved_prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction)
+            return at + "the section lies off the previous one (drifted onto a neighbour)";
+          // After a slice held within reach, the section must also continue the last section
+          // found unaided: a held section past the organ's end does not vouch for the next one.
+          if (!anchor.empty() && f.area_mm2 > p.shift_growth_ratio * anchor_area &&
+              area_outside(f.pts, anchor, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction)
+            return at + "the section grew off the last section found unaided (leak into a neighbour)";
+          leak = false;
+          // A wall that is not visible all round (bile against liver of close HU on a noisy scan)
+          // ends the organ only where its 3-D region ends too.
+          const bool region_goes_on = a_under >= 0.5 * f.area_mm2 && a_under <= p.max_area_ratio * prev_area;
+          if (f.edge_support < p.min_edge_support && !region_goes_on)
+            return at + "edge support lost (no wall around most of the contour)";
+          const double m = median_inside(c, k, f.pts);
+          if (!(std::abs(m - mu) <= p.max_mean_drift_hu)) return at + "intensity drifted from the organ's";
+          return {};
+        };
+        bool leak = false;
+        std::string why = why_not(f, leak);
+        if (!why.empty() && leak && p.continuity_margin_mm > 0 && held_in_a_row < p.max_held_in_a_row) {
+          // A leak through a wall that noise or partial volume hides (duodenum beside the organ on a
+          // thick slice) need not end the organ: the slice is fitted again with the pressure held
+          // within a margin of the previous section, moved by the organ's drift, and the organ
+          // goes on if that section passes every test.
+          Reach reach;
+          reach.around = moved_prev;
+          reach.margin_mm = p.continuity_margin_mm + p.continuity_slope * g.spacing_mm.z();
+          Fit held = fit_slice(c, k, scaled(reach.around, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area), &reach);
+          bool leak2 = false;
+          const double pinned = pinned_fraction(held.pts, reach, std::max(c.sx, c.sy));
+          if (pinned <= p.max_pinned_fraction && why_not(held, leak2).empty()) {
+            anchor = prev;
+            anchor_area = prev_area;
+            f = std::move(held);
+            why.clear();
+            ++held_in_a_row;
+            held_k.push_back(k);
+          }
+        } else if (why.empty()) {
+          held_in_a_row = 0;
+          anchor.clear();
         }
-        const double base_area = areas[areas.size() > span ? areas.size() - span : 0];
-        if (f.area_mm2 > p.max_area_mm2 || f.area_mm2 > p.max_area_ratio * prev_area ||
-            f.area_mm2 > p.max_area_ratio * base_area) {
-          note = "stopped at slice " + std::to_string(k) + ": area jumped (leak into a neighbour)";
-          return;
-        }
-        // A section that grows while much of it lies off the previous one is a neighbour joined
-        // in (a bowel loop beside a tapering fundus between thick slices), not the organ going on.
-        if (f.area_mm2 > p.shift_growth_ratio * prev_area &&
-            area_outside(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction) {
-          note = "stopped at slice " + std::to_string(k) + ": the section grew off the previous one (leak into a neighbour)";
-          return;
-        }
-        // A wall that is not visible all round (bile against liver of close HU on a noisy scan)
-        // ends the organ only where its 3-D region ends too.
-        const bool region_goes_on = a_under >= 0.5 * f.area_mm2 && a_under <= p.max_area_ratio * prev_area;
-        if (f.edge_support < p.min_edge_support && !region_goes_on) {
-          note = "stopped at slice " + std::to_string(k) + ": edge support lost (no wall around most of the contour)";
-          return;
-        }
-        const double m = median_inside(c, k, f.pts);
-        if (!(std::abs(m - mu) <= p.max_mean_drift_hu)) {
-          note = "stopped at slice " + std::to_string(k) + ": intensity drifted from the organ's";
+        if (!why.empty()) {
+          stop(why);
           return;
         }
         acc.push_back({k, f.pts});
+        const Point2 c_prev = centroid(prev), c_new = centroid(f.pts);
+        drift = {c_new.x - c_prev.x, c_new.y - c_prev.y};
         prev = f.pts;
         prev_area = f.area_mm2;
         areas.push_back(f.area_mm2);
@@ -518,10 +626,11 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
       note = std::string("reached the ") + (dir > 0 ? "last" : "first") + " slice";
     };
     if (parallel)
-      tbb::parallel_invoke([&] { propagate(+1, up, note_up); }, [&] { propagate(-1, down, note_down); });
+      tbb::parallel_invoke([&] { propagate(+1, up, note_up, held_up); },
+                           [&] { propagate(-1, down, note_down, held_down); });
     else {
-      propagate(+1, up, note_up);
-      propagate(-1, down, note_down);
+      propagate(+1, up, note_up, held_up);
+      propagate(-1, down, note_down, held_down);
     }
     Attempt at;
     at.all.assign(down.rbegin(), down.rend());
@@ -529,6 +638,8 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     at.all.insert(at.all.end(), up.begin(), up.end());
     at.note_up = note_up;
     at.note_down = note_down;
+    at.held.assign(held_down.rbegin(), held_down.rend());
+    at.held.insert(at.held.end(), held_up.begin(), held_up.end());
     at.lo = lo;
     at.hi = hi;
     at.mu = mu;
@@ -610,6 +721,11 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   std::snprintf(win, sizeof win, "organ window %.0f to %.0f HU (median %.0f HU); noise %.0f HU, region smoothing %.2f px",
                 lo, hi, mu, noise_hu, region_sigma_mm(p, c) / std::min(c.sx, c.sy));
   out.notes = {"towards k = 0: " + note_down, "towards k = " + std::to_string(K - 1) + ": " + note_up, win};
+  if (!at.held.empty()) {
+    std::string ks;
+    for (const auto k : at.held) ks += (ks.empty() ? "" : ", ") + std::to_string(k);
+    out.notes.push_back("leaked on slice(s) " + ks + "; fitted again within the previous section's reach");
+  }
   if (k0 != k_seed)
     out.notes.push_back("started at slice " + std::to_string(k0) + ", " + std::to_string(std::llabs(k0 - k_seed)) +
                         " from the seed's: the section at the seed was too small to fit");
