@@ -39,6 +39,11 @@ Scan stored_sagittal(const Scan& s);
 /// oblique acquisition): the anatomy, the reference and the seed turn with it.
 Scan tilted(const Scan& s, double degrees);
 
+/// Contrast enhancement of an organ: `boost_hu` added where `organ` (a mask on the scan's grid)
+/// is, blurred by a Gaussian of `blur_mm` so that its rim is partial volume as in a real scan
+/// (portal-venous liver ≈ 100–150 HU against ≈ 55 HU unenhanced).
+Scan contrast_enhanced(const Scan& s, const LabelMap& organ, double boost_hu, double blur_mm);
+
 /// Gaussian noise of `sigma_hu` added to every voxel (fixed random seed).
 Scan with_noise(const Scan& s, double sigma_hu, unsigned seed);
 

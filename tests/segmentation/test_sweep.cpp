@@ -192,6 +192,61 @@ TEST(SegmentSweep, RealGallbladder) {
   sweep("abdomen-ct-3mm", s, "gallbladder", true, true, 0);
 }
 
+// The shared real case changed the ways the unseen scans behind issue 15 differ from it, several
+// at once: contrast-enhanced liver (over the liver reference, 1.5 mm rim), 5 mm slices, more
+// noise, the field of view cut through the organ's cranial part; each with the
+// seed at the centre and moved 5 mm cranially and caudally. The issue sets no target for these
+// (its sweep is above); each variant's mean over its three seeds is held at the figure reached,
+// less 0.02, so that it cannot get worse unseen. Table: segmentation/README.md.
+TEST(SegmentSweep, RealGallbladderLikeUnseenScans) {
+  ORGANSMITH_REQUIRE_REAL_DATA();
+  Scan base = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/gallbladder-reference.nii.gz");
+  base.seed_lps_mm = seed_at_centre(base.ref);
+  const LabelMap liver = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/liver-reference.nii.gz").ref;
+  struct Unseen {
+    const char* name;
+    double boost_hu, slice_mm, noise_hu;
+    bool cut_top;
+    double reached;  // mean Dice over the three seeds
+  };
+  // On the case's own 3 mm pixels: a finer in-plane grid interpolated from them would be a
+  // 3 mm-resolution image on fine pixels, far blurrier than a real 0.78 mm scan.
+  const Unseen variants[] = {
+      {"liver +80 HU", 80, 3, 0, false, 0.854},
+      {"liver +80 HU, +10 HU noise", 80, 3, 10, false, 0.736},
+      {"liver +80 HU, 5 mm", 80, 5, 0, false, 0.824},
+      {"liver +80 HU, 5 mm, +10 HU", 80, 5, 10, false, 0.820},
+      {"same, cut through the top", 80, 5, 10, true, 0.852},
+      {"liver +120 HU, 5 mm, +15 HU", 120, 5, 15, false, 0.786},
+      {"5 mm, +10 HU", 0, 5, 10, false, 0.818},
+  };
+  std::vector<double> all;
+  for (const Unseen& u : variants) {
+    Scan s = base;
+    if (u.boost_hu > 0) s = contrast_enhanced(s, liver, u.boost_hu, 1.5);
+    if (u.slice_mm != s.ct.grid.spacing_mm.z()) s = resample_slices(s, u.slice_mm);
+    if (u.noise_hu > 0) s = with_noise(s, u.noise_hu, 7);
+    if (u.cut_top) s = crop_through_organ(s, 0.75, true);
+    double sum = 0;
+    for (double dz : {0.0, 5.0, -5.0}) {
+      Scan v = s;
+      v.seed_lps_mm.z() += dz;
+      char name[96];
+      std::snprintf(name, sizeof name, "%s, seed %+.0f mm S", u.name, dz);
+      const Row r = segment_and_score(name, v, "gallbladder", true);
+      sum += r.dice;
+      all.push_back(r.dice);
+    }
+    std::printf("%s: mean Dice %.3f over 3 seeds\n", u.name, sum / 3);
+    EXPECT_GE(sum / 3, u.reached - 0.02) << u.name << " got worse";
+  }
+  std::sort(all.begin(), all.end());
+  double mean = 0;
+  for (double d : all) mean += d / double(all.size());
+  std::printf("like unseen scans: %zu runs, mean Dice %.3f, lowest %.3f, median %.3f\n", all.size(), mean, all.front(),
+              all[all.size() / 2]);
+}
+
 TEST(SegmentSweep, RealTrachea) {
   ORGANSMITH_REQUIRE_REAL_DATA();
   const Scan s = real_scan("chest-dicom-8mm/dicom", "chest-dicom-8mm/trachea-reference.nii.gz");
