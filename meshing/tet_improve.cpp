@@ -1,3 +1,5 @@
+// Over 400 lines: the local repairs (face flips, constrained vertex moves) and their driver share
+// the face index and the quality score; apart, each would rebuild them.
 // Local repair of the tetrahedra Mesh_3 leaves below the quality gate (see tet_improve.h).
 
 #include "meshing/tet_improve.h"

@@ -533,10 +533,11 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         if (from_region && p.continuity_margin_mm > 0) {
           // The region may have joined a neighbour (duodenum through a wall that noise hides); a
           // start inside the previous section is tried too, and the section that continues the
-          // previous one more (more of its area within the shift tolerance of it) is kept.
+          // previous one more is kept: its area within the shift tolerance of the previous
+          // section less its area beyond (a larger section is not better for lying off it).
           Fit inside = fit_slice(c, k, scaled(prev, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area));
           auto on_prev = [&](const Fit& x) {
-            return x.area_mm2 * (1.0 - area_outside(x.pts, prev, p.shift_tolerance_mm, c.sx, c.sy));
+            return x.area_mm2 * (1.0 - 2.0 * area_outside(x.pts, prev, p.shift_tolerance_mm, c.sx, c.sy));
           };
           if (inside.area_mm2 >= p.min_area_mm2 && on_prev(inside) > on_prev(f)) f = std::move(inside);
         } else if (from_region &&

@@ -1,3 +1,4 @@
+// Over 400 lines: 17 property tests of one phantom, sharing its (cached) synthesis and helpers.
 // Properties of the synthetic phantom: determinism, tissue HU, organ sizes and placement, noise
 // level, seeds and option handling. A coarse grid (2.5 mm pixels, 5 mm slices) keeps it fast.
 
