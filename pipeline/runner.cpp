@@ -24,6 +24,7 @@
 #include "pipeline/simulation_picture.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/output_layout.h"
+#include "pipeline/organ_registry.h"
 #include "pipeline/output_scene.h"
 #include "pipeline/run_model.h"
 #include "viewer/snapshot.h"
@@ -610,10 +611,16 @@ class Runner {
 
   /// The case's own organ registry, when it has one (empty otherwise: the embedded registry is
   /// part of the tool version).
-  std::string registry_digest() const { return case_.registry_toml.empty() ? "" : sha256_hex(case_.registry_toml); }
+  // The organ registry and presets in force: the case's, else the embedded ones (a build with
+  // other embedded presets must not reuse a segmentation made with the old ones).
+  std::string registry_digest() const {
+    return sha256_hex(case_.registry_toml.empty() ? std::string(builtin_registry_toml()) : case_.registry_toml);
+  }
 
+  // The build is part of every stage's inputs: an upgraded organsmith of the same version string
+  // (a development build) recomputes rather than reusing what another build wrote.
   std::string fingerprint(const std::string& stage, const std::string& inputs) const {
-    return sha256_hex(tool_version() + "\n" + stage + "\n" + inputs);
+    return sha256_hex(tool_version() + "\n" + tool_git_commit() + "\n" + stage + "\n" + inputs);
   }
 
   const nlohmann::json* previous_stage(const std::string& name) const {
