@@ -172,20 +172,9 @@ struct Reach {
 double pinned_fraction(const std::vector<Point2>& pts, const Reach& reach, double tol_mm) {
   if (pts.empty() || reach.around.size() < 3) return 0.0;
   std::size_t pinned = 0;
-  const auto& a = reach.around;
-  for (const auto& q : pts) {
-    if (seg::point_in_polygon(a, q)) continue;
-    double d2 = 1e300;
-    for (std::size_t i = 0; i < a.size(); ++i) {
-      const Point2& u = a[i];
-      const Point2& v = a[(i + 1) % a.size()];
-      const double ex = v.x - u.x, ey = v.y - u.y, l2 = ex * ex + ey * ey;
-      const double t = l2 > 0 ? std::clamp(((q.x - u.x) * ex + (q.y - u.y) * ey) / l2, 0.0, 1.0) : 0.0;
-      const double dx = u.x + t * ex - q.x, dy = u.y + t * ey - q.y;
-      d2 = std::min(d2, dx * dx + dy * dy);
-    }
-    if (std::sqrt(d2) >= reach.margin_mm - tol_mm) ++pinned;
-  }
+  for (const auto& q : pts)
+    if (!seg::point_in_polygon(reach.around, q) && seg::distance_to_boundary(reach.around, q) >= reach.margin_mm - tol_mm)
+      ++pinned;
   return double(pinned) / double(pts.size());
 }
 
@@ -495,9 +484,9 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
       double anchor_area = 0;
       auto stop = [&](const std::string& why) {
         note = why;
-        if (held_in_a_row > 0 && !acc.empty() && !held_k.empty() && held_k.back() == acc.back().k) {
-          // The slice before was only held within reach and the organ does not go on after it:
-          // that slice lay past the organ's end, it was not a leak in the organ's middle.
+        // Slices just before that were only held within reach, after which the organ does not go
+        // on, lay past the organ's end: they were not a leak in the organ's middle.
+        for (; held_in_a_row > 0; --held_in_a_row) {
           note += "; slice " + std::to_string(acc.back().k) + " (held within reach) dropped";
           acc.pop_back();
           held_k.pop_back();
@@ -602,8 +591,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
           bool leak2 = false;
           const double pinned = pinned_fraction(held.pts, reach, std::max(c.sx, c.sy));
           if (pinned <= p.max_pinned_fraction && why_not(held, leak2).empty()) {
-            anchor = prev;
-            anchor_area = prev_area;
+            if (held_in_a_row == 0) anchor = prev, anchor_area = prev_area;
             f = std::move(held);
             why.clear();
             ++held_in_a_row;

@@ -4,6 +4,7 @@
 #include <Eigen/Core>
 
 #include <algorithm>
+#include <limits>
 #include <cassert>
 #include <cmath>
 #include <map>
@@ -178,6 +179,12 @@ bool chord_inside(const std::vector<Point2>& p, std::size_t i, std::size_t j) {
 }
 
 }  // namespace
+
+double distance_to_boundary(const std::vector<Point2>& p, Point2 q) {
+  double d = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < p.size(); ++i) d = std::min(d, segment_distance(q, p[i], p[(i + 1) % p.size()]));
+  return d;
+}
 
 std::vector<Point2> cut_necks(const std::vector<Point2>& input, const std::vector<Point2>& keep, const NeckOptions& o) {
   std::vector<Point2> p = input;

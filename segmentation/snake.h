@@ -66,6 +66,8 @@ bool self_intersects(const std::vector<Point2>& p);
 void remove_loops(std::vector<Point2>& p);
 /// True when `q` lies inside the closed polygon `p` (even–odd rule).
 bool point_in_polygon(const std::vector<Point2>& p, Point2 q);
+/// Distance (mm) from q to the closed polygon's boundary.
+double distance_to_boundary(const std::vector<Point2>& p, Point2 q);
 
 struct NeckOptions {
   double max_neck_ratio = 0.8;  ///< cut when the neck is narrower than this × the smaller lobe's equivalent diameter (default 0.8)
