@@ -257,10 +257,10 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
     if (p.seat_band_mm > 0 && s.points.size() >= 8) {
       // Seating: the region window that found the organ is deliberately conservative (it stops
       // short of the half-way HU so that it does not leak), so the contour rests a fraction of
-      // the blur width inside the wall. Each point moves along its normal, by at most
-      // seat_band_mm, to where the lightly smoothed HU crosses half-way between the organ's mean
-      // and the tissue just outside — the boundary of a blurred wall, and the convention of
-      // voxel-centre labels. Where the outside does not differ from the organ by seat_min_contrast_hu
+      // the blur width inside the wall — further the brighter the neighbour (contrast-enhanced
+      // liver). Each point moves along its normal, by at most seat_band_mm, to where the smoothed
+      // HU steps half-way between the organ's mean and the tissue just outside — the boundary of a
+      // blurred wall, and the convention of voxel-centre labels. Where the outside does not differ from the organ by seat_min_contrast_hu
       // (no visible wall), the point stays.
       const Image2f sm = seg::smooth_slice(hu.data(), r.w, r.h, c.sx, c.sy, p.seat_sigma_mm);
       const auto& P = s.points;
@@ -279,19 +279,17 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
         const double out = at(reach);
         if (std::abs(out - organ) < p.seat_min_contrast_hu) continue;
         ++walled;
-        const double half = 0.5 * (organ + out);
-        // The crossing nearest to the point within the band.
-        double best = 1e300;
-        double prev = at(-p.seat_band_mm);
-        for (double t = -p.seat_band_mm + step; t <= p.seat_band_mm + 1e-9; t += step) {
-          const double v = at(t);
-          if ((prev - half) * (v - half) <= 0 && prev != v) {
-            const double tc = t - step + step * (half - prev) / (v - prev);
-            if (std::abs(tc) < std::abs(best)) best = tc;
-          }
-          prev = v;
+        // Where the profile steps from the organ to the outside: the split of the band into an
+        // organ part and an outside part with the least squared misfit to the two levels. Each
+        // sample moved across the split changes that misfit by (out − organ)(2v − organ − out), so
+        // the split is where the running sum of that term is lowest — the half-way crossing of a
+        // blurred wall, taken over the whole band rather than at the nearest (noise) crossing.
+        double run = 0, lowest = 0, best = -p.seat_band_mm;
+        for (double t = -p.seat_band_mm; t <= p.seat_band_mm + 1e-9; t += step) {
+          run += (out - organ) * (2.0 * at(t) - organ - out);
+          if (run < lowest) lowest = run, best = t + step;
         }
-        if (best < 1e299) shift[i] = best;
+        shift[i] = std::min(best, p.seat_band_mm);
       }
       // Smooth the shifts along the contour (a wall is not seated point by point through noise).
       std::vector<Point2> moved(n);
@@ -303,6 +301,7 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
       }
       fit.edge_support = double(walled) / double(n);
       seg::remove_loops(moved);
+
       if (moved.size() >= 8) s.points = std::move(moved);
     }
     fit.pts.clear();
