@@ -260,8 +260,8 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
       // the blur width inside the wall — further the brighter the neighbour (contrast-enhanced
       // liver). Each point moves along its normal, by at most seat_band_mm, to where the smoothed
       // HU steps half-way between the organ's mean and the tissue just outside — the boundary of a
-      // blurred wall, and the convention of voxel-centre labels. Where the outside does not differ from the organ by seat_min_contrast_hu
-      // (no visible wall), the point stays.
+      // blurred wall, and the convention of voxel-centre labels. Where the outside does not
+      // differ from the organ by seat_min_contrast_hu (no visible wall), the point stays.
       const Image2f sm = seg::smooth_slice(hu.data(), r.w, r.h, c.sx, c.sy, p.seat_sigma_mm);
       const auto& P = s.points;
       const std::size_t n = P.size();
@@ -301,7 +301,6 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
       }
       fit.edge_support = double(walled) / double(n);
       seg::remove_loops(moved);
-
       if (moved.size() >= 8) s.points = std::move(moved);
     }
     fit.pts.clear();

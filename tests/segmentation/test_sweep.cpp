@@ -1,3 +1,5 @@
+// Over 400 lines: the segmentation sweep and the mesh sweep of the same variants share the scan
+// loaders, the variant list and the ingest reordering in this file's anonymous namespace.
 // Robustness sweep of the segmentation: each shared real case and the phantom, changed the ways
 // unseen scans differ (slice thickness 0.7–5 mm, a field of view cutting the organ, RAS and
 // sagittal storage, a 10° oblique grid, +20 HU noise, the seed moved 5 mm along each axis or
@@ -79,7 +81,7 @@ Row segment_and_score(const std::string& name, const Scan& raw, const std::strin
     if (seeded) req.seed_lps_mm = s.seed_lps_mm;
     const SegmentationResult r = segment_organs(s.ct, {req}, {}, np);
     const Score sc = score_against(s.ref, r.labels, r.organs[0].label);
-    // To look at a variant: ORGANSMITH_SWEEP_DUMP=DIR keeps its CT, reference and segmentation.
+    // To look at a variant: ORGANSMITH_SWEEP_DUMP=DIR keeps its CT, reference, segmentation and seed.
     if (const char* dump = std::getenv("ORGANSMITH_SWEEP_DUMP")) {
       std::string dir = organ + "_" + name;
       for (char& c : dir)
