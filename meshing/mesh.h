@@ -57,8 +57,12 @@ struct MeshOptions {
   /// outer surface folds by 92–152° at a 1.5 mm edge and the remedies do not remove it (see
   /// meshing/README.md); 60 suits reference masks and solver meshes on coarse scans.
   double max_fold_deg = 0.0;
+  /// Smooth every axis by smoothing_sigma_vox × the coarsest spacing (a remedy): a label map's
+  /// shape is known to its coarsest voxel, so finer axes otherwise keep plates and steps thinner
+  /// than it (a 1 mm-thick last section on 3 mm pixels).
+  bool smoothing_isotropic = false;
   bool enforce_quality = true;       ///< throw MeshQualityError when a gate fails (else only report)
-  int quality_remedies = 3;          ///< an organ failing a gate is meshed again this many times at most: smoother, finer, both
+  int quality_remedies = 6;          ///< an organ failing a gate is meshed again this many times at most: smoother, finer, both, smoother at a 1.25× edge, smoother isotropically, smoother still
   bool skip_absent = true;           ///< an organ absent from the label map is skipped with a warning
 };
 

@@ -14,6 +14,9 @@
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/boost/graph/helpers.h>
 #include <CGAL/make_mesh_3.h>
+#include <CGAL/refine_mesh_3.h>
+#include <CGAL/Mesh_3/C3T3_helpers.h>
+#include <CGAL/Mesh_3/Protect_edges_sizing_field.h>
 
 #include <stdexcept>
 
@@ -27,6 +30,9 @@ using Domain = CGAL::Polyhedral_mesh_domain_with_features_3<K, Mesh>;
 using Tr = CGAL::Mesh_triangulation_3<Domain, CGAL::Default, CGAL::Sequential_tag>::type;
 using C3t3 = CGAL::Mesh_complex_3_in_triangulation_3<Tr, Domain::Corner_index, Domain::Curve_index>;
 using Criteria = CGAL::Mesh_criteria_3<Tr>;
+
+/// Smallest protecting ball, as a fraction of the feature edge size.
+constexpr double kSmallestBallFraction = 0.1;
 
 }  // namespace
 
@@ -55,7 +61,28 @@ TetMesh mesh3_tets_polyhedral(const SurfaceMesh& closed, std::int32_t region, do
   Criteria criteria(params::edge_size = edge, params::facet_angle = c.facet_angle_deg,
                     params::facet_size = c.facet_size_mm, params::facet_distance = c.facet_distance_mm,
                     params::cell_radius_edge_ratio = c.cell_radius_edge, params::cell_size = c.cell_size_mm);
-  C3t3 c3t3 = CGAL::make_mesh_3<C3t3>(domain, criteria, params::no_perturb(), params::no_exude());
+  // make_mesh_3 protects the features with balls that may shrink without bound: where two
+  // feature curves run close (rims of a coarsely sampled thin wall) the shrinking ran for over
+  // 15 minutes or crashed inside the triangulation (bus error; a 10 mm edge on the 128 phantom's
+  // trachea wall, Simulate.MaterialBandBracketsTheOrgansAnswer's 1.25× edge remedy). The
+  // same steps are run here with a smallest ball radius: a ball that would shrink below it stays
+  // at it (CGAL then accepts it touching its neighbours), and refinement continues.
+  C3t3 c3t3;
+  {
+    using EdgeCriteria = Criteria::Edge_criteria;
+    using Sizing = CGAL::Mesh_3::internal::Edge_criteria_sizing_field_wrapper<EdgeCriteria>;
+    CGAL::Mesh_3::Protect_edges_sizing_field<C3t3, Domain, Sizing> protect(
+        c3t3, domain, Sizing(criteria.edge_criteria_object()), kSmallestBallFraction * edge);
+    protect(true);
+    bool need_more = c3t3.triangulation().dimension() != 3;
+    if (!need_more) {
+      CGAL::Mesh_3::C3T3_helpers<C3t3, Domain> helper(c3t3, domain);
+      helper.update_restricted_facets();
+      need_more = c3t3.number_of_facets() == 0;
+    }
+    if (need_more) CGAL::Mesh_3::internal::init_c3t3(c3t3, domain, criteria, -1);
+  }
+  CGAL::refine_mesh_3(c3t3, domain, criteria, params::no_perturb(), params::no_exude(), params::no_reset_c3t3());
   if (c.odt_seconds > 0) CGAL::odt_optimize_mesh_3(c3t3, domain, params::time_limit = c.odt_seconds);
   if (c.perturb_bound_deg > 0)
     CGAL::perturb_mesh_3(c3t3, domain, params::time_limit = c.optimiser_seconds, params::sliver_bound = c.perturb_bound_deg);
