@@ -109,6 +109,7 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get(*t, organ, seen, "shift_growth_ratio", p.shift_growth_ratio);
     get(*t, organ, seen, "max_shifted_fraction", p.max_shifted_fraction);
     get(*t, organ, seen, "shift_tolerance_mm", p.shift_tolerance_mm);
+    get(*t, organ, seen, "guide_core_fraction", p.guide_core_fraction);
     get(*t, organ, seen, "area_ratio_span_mm", p.area_ratio_span_mm);
     get(*t, organ, seen, "max_mean_drift_hu", p.max_mean_drift_hu);
     get(*t, organ, seen, "min_fill", p.min_fill);

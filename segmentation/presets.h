@@ -49,6 +49,9 @@ struct OrganPreset {
   double shift_growth_ratio = 1.25;
   double max_shifted_fraction = 1.0;
   double shift_tolerance_mm = 3.0;
+  /// The next slice starts from the part of a section within shift_tolerance_mm of the section
+  /// before, where that part holds at least this fraction of its area (0 = from the whole section).
+  double guide_core_fraction = 0.0;
   double area_ratio_span_mm = 3;              ///< …and between slices this far apart, mm (thin slices)
   double max_mean_drift_hu = 25;              ///< propagation stops beyond this drift of the mean
   double min_fill = 0.55, max_aspect = 2.2;   ///< roundness tests of airway candidates

@@ -30,34 +30,72 @@ using seg::Point2;
 
 namespace {
 
+/// Contours `a` and `b` (slice mm) rasterised on one pixel grid, `b` dilated by `tol_mm`.
+struct PairRaster {
+  cv::Mat a, b;
+  double x0 = 0, y0 = 0;
+  int pad = 0;
+};
+
+PairRaster raster_pair(const std::vector<Point2>& a, const std::vector<Point2>& b, double tol_mm, double sx, double sy) {
+  PairRaster r;
+  double x1 = -1e300, y1 = -1e300;
+  r.x0 = r.y0 = 1e300;
+  for (const auto* c : {&a, &b})
+    for (const auto& p : *c) r.x0 = std::min(r.x0, p.x), r.y0 = std::min(r.y0, p.y), x1 = std::max(x1, p.x), y1 = std::max(y1, p.y);
+  r.pad = int(std::ceil(tol_mm / std::min(sx, sy))) + 2;
+  const int w = int(std::ceil((x1 - r.x0) / sx)) + 2 * r.pad + 1, h = int(std::ceil((y1 - r.y0) / sy)) + 2 * r.pad + 1;
+  auto to_px = [&](const std::vector<Point2>& c) {
+    std::vector<Point2> q;
+    for (const auto& p : c) q.push_back({(p.x - r.x0) / sx + r.pad, (p.y - r.y0) / sy + r.pad});
+    return q;
+  };
+  r.a = cv::Mat::zeros(h, w, CV_8U);
+  r.b = cv::Mat::zeros(h, w, CV_8U);
+  rasterise(to_px(a), w, h, [&](int x, int y) { r.a.at<std::uint8_t>(y, x) = 255; });
+  rasterise(to_px(b), w, h, [&](int x, int y) { r.b.at<std::uint8_t>(y, x) = 255; });
+  if (tol_mm > 0) {
+    const int rx = std::max(1, int(std::lround(tol_mm / sx))), ry = std::max(1, int(std::lround(tol_mm / sy)));
+    cv::dilate(r.b, r.b, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * rx + 1, 2 * ry + 1}));
+  }
+  return r;
+}
+
 /// Fraction of the area inside contour `a` that lies farther than `tol_mm` outside contour `b`
 /// (both in slice mm): how much of a new section is not a continuation of the previous one.
 double area_outside(const std::vector<Point2>& a, const std::vector<Point2>& b, double tol_mm, double sx, double sy) {
   if (a.size() < 3 || b.size() < 3) return 0.0;
-  double x0 = 1e300, y0 = 1e300, x1 = -1e300, y1 = -1e300;
-  for (const auto* c : {&a, &b})
-    for (const auto& p : *c) x0 = std::min(x0, p.x), y0 = std::min(y0, p.y), x1 = std::max(x1, p.x), y1 = std::max(y1, p.y);
-  const int pad = int(std::ceil(tol_mm / std::min(sx, sy))) + 2;
-  const int w = int(std::ceil((x1 - x0) / sx)) + 2 * pad + 1, h = int(std::ceil((y1 - y0) / sy)) + 2 * pad + 1;
-  auto to_px = [&](const std::vector<Point2>& c) {
-    std::vector<Point2> q;
-    for (const auto& p : c) q.push_back({(p.x - x0) / sx + pad, (p.y - y0) / sy + pad});
-    return q;
-  };
-  cv::Mat ma = cv::Mat::zeros(h, w, CV_8U), mb = cv::Mat::zeros(h, w, CV_8U);
-  rasterise(to_px(a), w, h, [&](int x, int y) { ma.at<std::uint8_t>(y, x) = 255; });
-  rasterise(to_px(b), w, h, [&](int x, int y) { mb.at<std::uint8_t>(y, x) = 255; });
-  if (tol_mm > 0) {
-    const int rx = std::max(1, int(std::lround(tol_mm / sx))), ry = std::max(1, int(std::lround(tol_mm / sy)));
-    cv::dilate(mb, mb, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * rx + 1, 2 * ry + 1}));
-  }
-  const int n = cv::countNonZero(ma);
+  const PairRaster r = raster_pair(a, b, tol_mm, sx, sy);
+  const int n = cv::countNonZero(r.a);
   if (n == 0) return 0.0;
   cv::Mat out;
-  cv::bitwise_and(ma, ~mb, out);
+  cv::bitwise_and(r.a, ~r.b, out);
   return double(cv::countNonZero(out)) / n;
 }
 
+/// The part of section `a` within `tol_mm` of section `b` (its largest piece, as a contour of
+/// boundary-pixel centres in slice mm), and that part's area in mm²; empty where none.
+std::pair<std::vector<Point2>, double> part_within(const std::vector<Point2>& a, const std::vector<Point2>& b, double tol_mm,
+                                                   double sx, double sy) {
+  if (a.size() < 3 || b.size() < 3) return {};
+  const PairRaster r = raster_pair(a, b, tol_mm, sx, sy);
+  cv::Mat in;
+  cv::bitwise_and(r.a, r.b, in);
+  cv::Mat lab, stats, centres;
+  const int n = cv::connectedComponentsWithStats(in, lab, stats, centres, 4);
+  int best = 0;
+  for (int i = 1; i < n; ++i)
+    if (best == 0 || stats.at<int>(i, cv::CC_STAT_AREA) > stats.at<int>(best, cv::CC_STAT_AREA)) best = i;
+  if (best == 0) return {};
+  cv::Mat piece = lab == best;
+  std::vector<std::vector<cv::Point>> contours;
+  cv::findContours(piece, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
+  if (contours.empty() || contours[0].size() < 4) return {};
+  std::vector<Point2> out;
+  for (const cv::Point& q : contours[0]) out.push_back({r.x0 + (q.x - r.pad) * sx, r.y0 + (q.y - r.pad) * sy});
+  if (polygon_area(out) < 0) std::reverse(out.begin(), out.end());
+  return {out, stats.at<int>(best, cv::CC_STAT_AREA) * sx * sy};
+}
 
 std::string fmt_mm(const Eigen::Vector3d& p) {
   char b[96];
@@ -475,6 +513,10 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     auto propagate = [&](int dir, std::vector<SliceContour>& acc, std::string& note, std::vector<std::int64_t>& held_k) {
       std::vector<Point2> prev = f0.pts;
       double prev_area = f0.area_mm2;
+      // Where the next slice starts from, and what its start decisions compare with: the previous
+      // section, less any part of it that lay off the section before (a lobe there is a neighbour
+      // joined in below the leak tests' limits more often than the organ).
+      std::vector<Point2> guide = f0.pts;
       // The organ's drift between slices (centroid of the last section less the one before).
       Point2 drift{0, 0};
       int held_in_a_row = 0;
@@ -499,10 +541,10 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         progress.report(std::min(0.99, double(++done) / 40.0), "segmenting " + p.organ);
         // Start inside the neighbour's contour, so the pressure grows it out to this slice's edge
         // rather than having to pull a too-large start back.
-        std::vector<Point2> init = scaled(prev, 0.7);
+        std::vector<Point2> init = scaled(guide, 0.7);
         // Where the 3-D region continues under the previous contour (a section that moved
         // sideways, as a fundus does between thick slices), start from its shrunken outline.
-        const cv::Mat under = seg::region_under(region, k, prev, c.sx, c.sy, p.region_reach_mm);
+        const cv::Mat under = seg::region_under(region, k, guide, c.sx, c.sy, p.region_reach_mm);
         double a_under = 0;
         bool from_region = false;
         if (!under.empty()) {
@@ -522,16 +564,16 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
           // start inside the previous section is tried too, and the section that continues the
           // previous one more is kept: its area within the shift tolerance of the previous
           // section less its area beyond (a larger section is not better for lying off it).
-          Fit inside = fit_slice(c, k, scaled(prev, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area));
+          Fit inside = fit_slice(c, k, scaled(guide, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area));
           auto on_prev = [&](const Fit& x) {
-            return x.area_mm2 * (1.0 - 2.0 * area_outside(x.pts, prev, p.shift_tolerance_mm, c.sx, c.sy));
+            return x.area_mm2 * (1.0 - 2.0 * area_outside(x.pts, guide, p.shift_tolerance_mm, c.sx, c.sy));
           };
           if (inside.area_mm2 >= p.min_area_mm2 && on_prev(inside) > on_prev(f)) f = std::move(inside);
         } else if (from_region &&
             area_outside(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction) {
           // Started from the region's outline the snake slid onto another structure: start again
           // inside the previous section.
-          Fit again = fit_slice(c, k, scaled(prev, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area));
+          Fit again = fit_slice(c, k, scaled(guide, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area));
           if (again.area_mm2 >= p.min_area_mm2 &&
               area_outside(again.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) <= p.max_shifted_fraction)
             f = std::move(again);
@@ -606,6 +648,12 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         acc.push_back({k, f.pts});
         const Point2 c_prev = centroid(prev), c_new = centroid(f.pts);
         drift = {c_new.x - c_prev.x, c_new.y - c_prev.y};
+        guide = f.pts;
+        if (p.guide_core_fraction > 0) {
+          auto [core, core_area] = part_within(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy);
+          if (core.size() >= 8 && core_area >= p.min_area_mm2 && core_area >= p.guide_core_fraction * f.area_mm2)
+            guide = std::move(core);
+        }
         prev = f.pts;
         prev_area = f.area_mm2;
         areas.push_back(f.area_mm2);
