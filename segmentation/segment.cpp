@@ -510,13 +510,14 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     std::vector<SliceContour> up, down;
     std::string note_up, note_down;
     std::vector<std::int64_t> held_up, held_down;
-    auto propagate = [&](int dir, std::vector<SliceContour>& acc, std::string& note, std::vector<std::int64_t>& held_k) {
+    auto propagate = [&](int dir, std::vector<SliceContour>& acc, std::string& note, std::vector<std::int64_t>& held_k,
+                         const std::vector<Point2>& seed_guide) {
       std::vector<Point2> prev = f0.pts;
       double prev_area = f0.area_mm2;
       // Where the next slice starts from, and what its start decisions compare with: the previous
       // section, less any part of it that lay off the section before (a lobe there is a neighbour
       // joined in below the leak tests' limits more often than the organ).
-      std::vector<Point2> guide = f0.pts;
+      std::vector<Point2> guide = seed_guide;
       // The organ's drift between slices (centroid of the last section less the one before).
       Point2 drift{0, 0};
       int held_in_a_row = 0;
@@ -661,11 +662,34 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
       note = std::string("reached the ") + (dir > 0 ? "last" : "first") + " slice";
     };
     if (parallel)
-      tbb::parallel_invoke([&] { propagate(+1, up, note_up, held_up); },
-                           [&] { propagate(-1, down, note_down, held_down); });
+      tbb::parallel_invoke([&] { propagate(+1, up, note_up, held_up, f0.pts); },
+                           [&] { propagate(-1, down, note_down, held_down, f0.pts); });
     else {
-      propagate(+1, up, note_up, held_up);
-      propagate(-1, down, note_down, held_down);
+      propagate(+1, up, note_up, held_up, f0.pts);
+      propagate(-1, down, note_down, held_down, f0.pts);
+    }
+    // The seed slice has no section before it: a lobe of a neighbour it took in can lead one
+    // direction onto that neighbour. Where part of the seed's section lies off the first section
+    // found the other way, and the first section this way lies mostly on that part, this way is
+    // run again from the part that continues the other way.
+    if (p.guide_core_fraction > 0) {
+      auto redo = [&](int dir, std::vector<SliceContour>& acc, std::string& note, std::vector<std::int64_t>& held_k,
+                      const std::vector<SliceContour>& other) {
+        if (acc.empty() || other.empty()) return;
+        auto [core, core_area] = part_within(f0.pts, other.front().pts, p.shift_tolerance_mm, c.sx, c.sy);
+        if (core.size() < 8 || core_area < p.min_area_mm2 || core_area < p.guide_core_fraction * f0.area_mm2 ||
+            core_area > 0.9 * f0.area_mm2)
+          return;
+        if (area_outside(acc.front().pts, core, p.shift_tolerance_mm, c.sx, c.sy) <= p.max_shifted_fraction) return;
+        std::vector<SliceContour> acc2;
+        std::string note2;
+        std::vector<std::int64_t> held2;
+        propagate(dir, acc2, note2, held2, core);
+        acc = std::move(acc2), note = std::move(note2), held_k = std::move(held2);
+      };
+      const std::vector<SliceContour> up0 = up, down0 = down;
+      redo(+1, up, note_up, held_up, down0);
+      redo(-1, down, note_down, held_down, up0);
     }
     Attempt at;
     at.all.assign(down.rbegin(), down.rend());
