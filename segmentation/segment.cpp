@@ -685,7 +685,8 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         std::string note2;
         std::vector<std::int64_t> held2;
         propagate(dir, acc2, note2, held2, core);
-        acc = std::move(acc2), note = std::move(note2), held_k = std::move(held2);
+        acc = std::move(acc2), held_k = std::move(held2);
+        note = note2 + " (run again from the part of the seed's section that continues the other way)";
       };
       const std::vector<SliceContour> up0 = up, down0 = down;
       redo(+1, up, note_up, held_up, down0);
