@@ -131,6 +131,10 @@ cv::Mat region_under(const Region3d& r, std::int64_t k, const std::vector<Point2
 }
 
 std::vector<Point2> mask_outline_mm(const Region3d& r, const cv::Mat& m, double sx, double sy) {
+  return mask_outline_mm(m, r.x0 * sx, r.y0 * sy, sx, sy);
+}
+
+std::vector<Point2> mask_outline_mm(const cv::Mat& m, double x0_mm, double y0_mm, double sx, double sy) {
   std::vector<Point2> out;
   if (m.empty()) return out;
   cv::Mat padded;
@@ -144,7 +148,7 @@ std::vector<Point2> mask_outline_mm(const Region3d& r, const cv::Mat& m, double 
     if (a > best_area) best_area = a, best = i;
   }
   if (best == contours.size()) return out;
-  for (const cv::Point& p : contours[best]) out.push_back({(r.x0 + p.x - 1) * sx, (r.y0 + p.y - 1) * sy});
+  for (const cv::Point& p : contours[best]) out.push_back({x0_mm + (p.x - 1) * sx, y0_mm + (p.y - 1) * sy});
   // findContours walks clockwise in image coordinates (y down) for outer contours; the snake
   // wants counter-clockwise in (i, j) by the shoelace sign.
   if (polygon_area(out) < 0) std::reverse(out.begin(), out.end());

@@ -47,5 +47,7 @@ cv::Mat region_under(const Region3d& r, std::int64_t k, const std::vector<Point2
 /// Outer outline (slice mm, counter-clockwise in pixel coordinates, through pixel centres) of the
 /// largest blob of a box mask; empty when the mask is empty.
 std::vector<Point2> mask_outline_mm(const Region3d& r, const cv::Mat& m, double sx, double sy);
+/// The same for a mask whose pixel (0, 0) lies at (x0_mm, y0_mm).
+std::vector<Point2> mask_outline_mm(const cv::Mat& m, double x0_mm, double y0_mm, double sx, double sy);
 
 }  // namespace organsmith::seg

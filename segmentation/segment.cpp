@@ -87,13 +87,8 @@ std::pair<std::vector<Point2>, double> part_within(const std::vector<Point2>& a,
   for (int i = 1; i < n; ++i)
     if (best == 0 || stats.at<int>(i, cv::CC_STAT_AREA) > stats.at<int>(best, cv::CC_STAT_AREA)) best = i;
   if (best == 0) return {};
-  cv::Mat piece = lab == best;
-  std::vector<std::vector<cv::Point>> contours;
-  cv::findContours(piece, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
-  if (contours.empty() || contours[0].size() < 4) return {};
-  std::vector<Point2> out;
-  for (const cv::Point& q : contours[0]) out.push_back({r.x0 + (q.x - r.pad) * sx, r.y0 + (q.y - r.pad) * sy});
-  if (polygon_area(out) < 0) std::reverse(out.begin(), out.end());
+  std::vector<Point2> out = seg::mask_outline_mm(lab == best, r.x0 - r.pad * sx, r.y0 - r.pad * sy, sx, sy);
+  if (out.size() < 4) return {};
   return {out, stats.at<int>(best, cv::CC_STAT_AREA) * sx * sy};
 }
 
