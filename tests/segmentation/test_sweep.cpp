@@ -216,53 +216,94 @@ TEST(SegmentSweep, RealGallbladder) {
 // seed at the centre and moved 5 mm cranially and caudally. The issue sets no target for these
 // (its sweep is above); each variant's mean over its three seeds is held at the figure reached,
 // less 0.02, so that it cannot get worse unseen. Table: segmentation/README.md.
+// The shared case changed like the unseen scans of issue 15, several ways at once.
+struct Unseen {
+  const char* name;
+  double boost_hu, slice_mm, noise_hu;
+  bool cut_top;
+  double reached;  // mean Dice over the three seeds
+};
+// On the case's own 3 mm pixels: a finer in-plane grid interpolated from them would be a
+// 3 mm-resolution image on fine pixels, far blurrier than a real 0.78 mm scan.
+const Unseen kUnseen[] = {
+    {"liver +80 HU", 80, 3, 0, false, 0.875},
+    {"liver +80 HU, +10 HU noise", 80, 3, 10, false, 0.847},
+    {"liver +80 HU, 5 mm", 80, 5, 0, false, 0.830},
+    {"liver +80 HU, 5 mm, +10 HU", 80, 5, 10, false, 0.844},
+    {"same, cut through the top", 80, 5, 10, true, 0.878},
+    {"liver +120 HU, 5 mm, +15 HU", 120, 5, 15, false, 0.837},
+    {"5 mm, +10 HU", 0, 5, 10, false, 0.845},
+};
+
+Scan like_unseen(const Scan& base, const LabelMap& liver, const Unseen& u) {
+  Scan s = base;
+  if (u.boost_hu > 0) s = contrast_enhanced(s, liver, u.boost_hu, 1.5);
+  if (u.slice_mm != s.ct.grid.spacing_mm.z()) s = resample_slices(s, u.slice_mm);
+  if (u.noise_hu > 0) s = with_noise(s, u.noise_hu, 7);
+  if (u.cut_top) s = crop_through_organ(s, 0.75, true);
+  return s;
+}
+
+/// Segments `s` from its seed and 5 mm cranial and caudal of it; returns the three Dice.
+std::vector<double> three_seeds(const Scan& s, const std::string& name) {
+  std::vector<double> dice;
+  for (double dz : {0.0, 5.0, -5.0}) {
+    Scan v = s;
+    v.seed_lps_mm.z() += dz;
+    char label[128];
+    std::snprintf(label, sizeof label, "%s, seed %+.0f mm S", name.c_str(), dz);
+    dice.push_back(segment_and_score(label, v, "gallbladder", true).dice);
+  }
+  return dice;
+}
+
+void print_spread(const char* what, std::vector<double> all) {
+  std::sort(all.begin(), all.end());
+  double mean = 0;
+  for (double d : all) mean += d / double(all.size());
+  const auto below = std::count_if(all.begin(), all.end(), [](double d) { return d < 0.8; });
+  std::printf("%s: %zu runs, mean Dice %.3f, lowest %.3f, median %.3f, below 0.8: %td\n", what, all.size(), mean,
+              all.front(), all[all.size() / 2], below);
+}
+
 TEST(SegmentSweep, RealGallbladderLikeUnseenScans) {
   ORGANSMITH_REQUIRE_REAL_DATA();
   Scan base = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/gallbladder-reference.nii.gz");
   base.seed_lps_mm = seed_at_centre(base.ref);
   const LabelMap liver = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/liver-reference.nii.gz").ref;
-  struct Unseen {
-    const char* name;
-    double boost_hu, slice_mm, noise_hu;
-    bool cut_top;
-    double reached;  // mean Dice over the three seeds
-  };
-  // On the case's own 3 mm pixels: a finer in-plane grid interpolated from them would be a
-  // 3 mm-resolution image on fine pixels, far blurrier than a real 0.78 mm scan.
-  const Unseen variants[] = {
-      {"liver +80 HU", 80, 3, 0, false, 0.878},
-      {"liver +80 HU, +10 HU noise", 80, 3, 10, false, 0.847},
-      {"liver +80 HU, 5 mm", 80, 5, 0, false, 0.830},
-      {"liver +80 HU, 5 mm, +10 HU", 80, 5, 10, false, 0.845},
-      {"same, cut through the top", 80, 5, 10, true, 0.878},
-      {"liver +120 HU, 5 mm, +15 HU", 120, 5, 15, false, 0.837},
-      {"5 mm, +10 HU", 0, 5, 10, false, 0.845},
-  };
   std::vector<double> all;
-  for (const Unseen& u : variants) {
-    Scan s = base;
-    if (u.boost_hu > 0) s = contrast_enhanced(s, liver, u.boost_hu, 1.5);
-    if (u.slice_mm != s.ct.grid.spacing_mm.z()) s = resample_slices(s, u.slice_mm);
-    if (u.noise_hu > 0) s = with_noise(s, u.noise_hu, 7);
-    if (u.cut_top) s = crop_through_organ(s, 0.75, true);
-    double sum = 0;
-    for (double dz : {0.0, 5.0, -5.0}) {
-      Scan v = s;
-      v.seed_lps_mm.z() += dz;
-      char name[96];
-      std::snprintf(name, sizeof name, "%s, seed %+.0f mm S", u.name, dz);
-      const Row r = segment_and_score(name, v, "gallbladder", true);
-      sum += r.dice;
-      all.push_back(r.dice);
-    }
-    std::printf("%s: mean Dice %.3f over 3 seeds\n", u.name, sum / 3);
-    EXPECT_GE(sum / 3, u.reached - 0.02) << u.name << " got worse";
+  for (const Unseen& u : kUnseen) {
+    const std::vector<double> d = three_seeds(like_unseen(base, liver, u), u.name);
+    const double mean = (d[0] + d[1] + d[2]) / 3;
+    all.insert(all.end(), d.begin(), d.end());
+    std::printf("%s: mean Dice %.3f over 3 seeds\n", u.name, mean);
+    EXPECT_GE(mean, u.reached - 0.02) << u.name << " got worse";
   }
-  std::sort(all.begin(), all.end());
+  print_spread("like unseen scans", all);
+}
+
+// The same 21 runs, each on three more noise draws (+6 HU): one fixed draw per variant says
+// little on scans where a few HU decide whether a short section ends the organ. Held at the mean
+// reached, less 0.02.
+TEST(SegmentSweep, RealGallbladderLikeUnseenScansMoreNoiseDraws) {
+  ORGANSMITH_REQUIRE_REAL_DATA();
+  Scan base = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/gallbladder-reference.nii.gz");
+  base.seed_lps_mm = seed_at_centre(base.ref);
+  const LabelMap liver = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/liver-reference.nii.gz").ref;
+  constexpr double kReachedMean = 0.833;
+  std::vector<double> all;
+  for (const Unseen& u : kUnseen) {
+    const Scan s = like_unseen(base, liver, u);
+    for (unsigned draw = 1; draw <= 3; ++draw) {
+      const std::vector<double> d =
+          three_seeds(with_noise(s, 6.0, 100 + draw), std::string(u.name) + ", draw " + std::to_string(draw));
+      all.insert(all.end(), d.begin(), d.end());
+    }
+  }
+  print_spread("like unseen scans, three more noise draws", all);
   double mean = 0;
   for (double d : all) mean += d / double(all.size());
-  std::printf("like unseen scans: %zu runs, mean Dice %.3f, lowest %.3f, median %.3f\n", all.size(), mean, all.front(),
-              all[all.size() / 2]);
+  EXPECT_GE(mean, kReachedMean - 0.02);
 }
 
 TEST(SegmentSweep, RealTrachea) {
