@@ -529,7 +529,6 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
       // most often the organ's last small section (the fundus against the liver), not a neighbour
       // past its end; dropping them had cost up to 0.08 Dice on noisier such runs (segmentation
       // README).
-      auto stop = [&](const std::string& why) { note = why; };
       // Areas of the slices behind, for the leak test over at least area_ratio_span_mm (thin slices
       // let a leak grow by a few per cent a slice, each step under the ratio).
       std::vector<double> areas{f0.area_mm2};
@@ -553,7 +552,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         }
         const double m_init = median_inside(c, k, init);
         if (!(m_init >= lo && m_init <= hi)) {
-          stop("stopped at slice " + std::to_string(k) + ": the region left the organ's HU window");
+          note = "stopped at slice " + std::to_string(k) + ": the region left the organ's HU window";
           return;
         }
         Fit f = fit_slice(c, k, init, p, lo, hi, p.roi_margin_mm, open_for(prev_area));
@@ -640,7 +639,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
           anchor.clear();
         }
         if (!why.empty()) {
-          stop(why);
+          note = why;
           return;
         }
         acc.push_back({k, f.pts});
