@@ -117,19 +117,15 @@ TEST(Simulate, OrganLoadCasesConvergeAndBalanceInCalculix) {
   const fs::path out = tmp / "out";
   {
     std::ofstream c(tmp / "case.toml");
-    c << "[case]\ninput = \"phantom\"\n[[organ]]\nname = \"gallbladder\"\n[[organ]]\nname = \"trachea\"\n"
-         "[stages.mesh]\nedge_mm = 4.0\npressure_kPa = { gallbladder = 0.1, trachea = 0.01 }\n"
-         // Coarse on purpose (solver time): the trachea lumen's volume gate fails by 5–7 % at a
-         // 4 mm edge; the solver's answer is what this test checks.
-         "quality_gate = \"report\"\n"
+    // The gallbladder only: the trachea's load case (both cut ends fixed) is the real 8 mm scan's
+    // test below; on the phantom it added 137 s of solver time and nothing this test checks.
+    c << "[case]\ninput = \"phantom\"\n[[organ]]\nname = \"gallbladder\"\n"
+         "[stages.mesh]\nedge_mm = 4.0\npressure_kPa = { gallbladder = 0.1 }\n"
          "[stages.simulate]\nenabled = true\n";
   }
   const auto r = run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out) + " --until simulate");
   ASSERT_EQ(r.exit_code, 0) << r.output;
-  for (const char* organ : {"gallbladder", "trachea"}) {
-    SCOPED_TRACE(organ);
-    expect_load_case_answered(out, organ, std::string(organ) == "gallbladder" ? 100.0 : 10.0);
-  }
+  expect_load_case_answered(out, "gallbladder", 100.0);
   {  // the phantom's liver touches its gallbladder: the fixed set is where it does
     EXPECT_NE(file_text(out / "meshes" / "gallbladder" / "gallbladder.inp").find("gallbladder_liver_bed: the liver bed from the liver label"),
               std::string::npos);
@@ -141,7 +137,7 @@ TEST(Simulate, OrganLoadCasesConvergeAndBalanceInCalculix) {
   const auto again = run_cli("simulate " + quoted(out));
   EXPECT_EQ(again.exit_code, 0) << again.output;
   EXPECT_EQ(organsmith::testing::file_digests(out / "simulation"), before);
-  const auto late = run_cli("simulate " + quoted(out) + " --organ trachea --timeout-s 0.5");
+  const auto late = run_cli("simulate " + quoted(out) + " --organ gallbladder --timeout-s 0.5");
   EXPECT_EQ(late.exit_code, 71) << late.output;
   EXPECT_NE(late.output.find("did not finish"), std::string::npos) << late.output;
   EXPECT_EQ(organsmith::testing::file_digests(out / "simulation"), before);
