@@ -124,6 +124,8 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get(*t, organ, seen, "continuity_slope", p.continuity_slope);
     get(*t, organ, seen, "max_held_in_a_row", p.max_held_in_a_row);
     get(*t, organ, seen, "max_pinned_fraction", p.max_pinned_fraction);
+    get(*t, organ, seen, "max_pinned_fraction_walled", p.max_pinned_fraction_walled);
+    get(*t, organ, seen, "min_walled_edge_support", p.min_walled_edge_support);
     get(*t, organ, seen, "alpha", p.alpha);
     get(*t, organ, seen, "beta", p.beta);
     get(*t, organ, seen, "kappa", p.kappa);

@@ -67,6 +67,8 @@ struct OrganPreset {
   double continuity_margin_mm = 0, continuity_slope = 0;
   int max_held_in_a_row = 1;
   double max_pinned_fraction = 1.0;           ///< …and only where at most this fraction of the held contour rests on the reach's limit
+  double max_pinned_fraction_walled = 0.0;    ///< …or at most this fraction, where the held contour has its wall seen around…
+  double min_walled_edge_support = 1.0;       ///< …at least this fraction of it (edge support)
   double alpha = 0.6, beta = 0.3, kappa = 0.4, balloon = 0.5;  ///< snake (see SnakeOptions)
   double point_spacing_mm = 1.5;
   double gvf_mu = 0.2;

@@ -627,7 +627,13 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
           Fit held = fit_slice(c, k, scaled(reach.around, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area), &reach);
           bool leak2 = false;
           const double pinned = pinned_fraction(held.pts, reach, std::max(c.sx, c.sy));
-          if (pinned <= p.max_pinned_fraction && why_not(held, leak2).empty()) {
+          // A held section with its wall seen around most of it continues the organ though more
+          // of it rests on the limit: a neighbour with no wall between (duodenum against the
+          // neck) holds one side; past the organ's end the held contour fills the reach over
+          // tissue with little wall (segmentation README, "Held sections with their wall").
+          const bool rests_on_wall = pinned <= p.max_pinned_fraction ||
+                                     (pinned <= p.max_pinned_fraction_walled && held.edge_support >= p.min_walled_edge_support);
+          if (rests_on_wall && why_not(held, leak2).empty()) {
             if (held_in_a_row == 0) anchor = prev, anchor_area = prev_area;
             f = std::move(held);
             why.clear();

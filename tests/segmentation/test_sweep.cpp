@@ -232,7 +232,7 @@ const Unseen kUnseen[] = {
     {"liver +80 HU, 5 mm, +10 HU", 80, 5, 10, false, 0.844},
     {"same, cut through the top", 80, 5, 10, true, 0.878},
     {"liver +120 HU, 5 mm, +15 HU", 120, 5, 15, false, 0.837},
-    {"5 mm, +10 HU", 0, 5, 10, false, 0.845},
+    {"5 mm, +10 HU", 0, 5, 10, false, 0.847},
 };
 
 Scan like_unseen(const Scan& base, const LabelMap& liver, const Unseen& u) {
@@ -292,7 +292,7 @@ TEST(SegmentSweep, RealGallbladderLikeUnseenScansMoreNoiseDraws) {
   Scan base = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/gallbladder-reference.nii.gz");
   base.seed_lps_mm = seed_at_centre(base.ref);
   const LabelMap liver = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/liver-reference.nii.gz").ref;
-  constexpr double kReachedMean = 0.833;
+  constexpr double kReachedMean = 0.845;
   std::vector<double> all;
   for (const Unseen& u : kUnseen) {
     const Scan s = like_unseen(base, liver, u);
