@@ -105,6 +105,7 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get(*t, organ, seen, "max_area_mm2", p.max_area_mm2);
     get(*t, organ, seen, "max_area_ratio", p.max_area_ratio);
     get(*t, organ, seen, "seed_slide_mm", p.seed_slide_mm);
+    get(*t, organ, seen, "min_extent_mm", p.min_extent_mm);
     get(*t, organ, seen, "divide_span_mm", p.divide_span_mm);
     get(*t, organ, seen, "shift_growth_ratio", p.shift_growth_ratio);
     get(*t, organ, seen, "max_shifted_fraction", p.max_shifted_fraction);

@@ -44,6 +44,9 @@ struct OrganPreset {
   /// A seed whose section is too small to fit starts from the nearest slice within this distance
   /// (mm) where the organ fits (0 = only the seed's slice).
   double seed_slide_mm = 0.0;
+  /// A result shorter than this along the slices (mm) also tries the starts on the slices within
+  /// seed_slide_mm and keeps the longest (0 = never).
+  double min_extent_mm = 0.0;
   /// Airway: a second air component under the lumen this far back (mm) also marks the carina.
   double divide_span_mm = 0.0;
   double shift_growth_ratio = 1.25;
