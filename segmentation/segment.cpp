@@ -746,6 +746,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   auto extent_mm = [&](const Attempt& a) { return double(a.all.back().k - a.all.front().k + 1) * g.spacing_mm.z(); };
   if (extent_mm(at) < p.min_extent_mm) {
     const double first_mm = extent_mm(at);
+    const std::int64_t k_first = k0;
     std::int64_t k_best = k0;
     for (int d = 1; d <= std::max(1, slide); ++d)
       for (int sign : {-1, 1}) {
@@ -761,9 +762,12 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         }
       }
     k0 = k_best;
-    char b[160];
-    std::snprintf(b, sizeof b, "the start at the seed gave an organ %.0f mm long across the slices (under %.0f mm)", first_mm, p.min_extent_mm);
-    start_note = b;
+    if (k0 != k_first) {
+      char b[160];
+      std::snprintf(b, sizeof b, "the start at the seed gave an organ %.0f mm long across the slices (under %.0f mm)",
+                    first_mm, p.min_extent_mm);
+      start_note = b;
+    }
   }
   // The organ's median over every slice found is a steadier centre for the window than one
   // slice around the seed (seeds a slice apart gave windows 6 HU apart on a real scan); a
