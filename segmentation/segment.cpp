@@ -444,9 +444,12 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     p.region_above_hu = std::max(p.region_above_hu, 2.33 * left_hu);
     p.region_below_hu = std::max(p.region_below_hu, 2.33 * left_hu);
   }
-  // What the seed's neighbourhood looks like decides the organ's window.
-  const double seed_med = median_inside(c, k0, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24));
-  if (!(seed_med >= p.seed_hu_lo && seed_med <= p.seed_hu_hi)) {
+  // What the seed's neighbourhood looks like decides the organ's window: the median HU around
+  // the seed's position on slice k, and whether it lies in the organ's seed range.
+  auto hu_at_seed = [&](std::int64_t k) { return median_inside(c, k, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24)); };
+  auto seed_like = [&](double m) { return m >= p.seed_hu_lo && m <= p.seed_hu_hi; };
+  const double seed_med = hu_at_seed(k0);
+  if (!seed_like(seed_med)) {
     char b[256];
     std::snprintf(b, sizeof b, "%s seed %s lies in tissue of median %.0f HU, outside the %s range [%.0f, %.0f] HU",
                   p.organ.c_str(), fmt_mm(seed_lps).c_str(), seed_med, p.organ.c_str(), p.seed_hu_lo, p.seed_hu_hi);
@@ -478,8 +481,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     // refit once with the window centred on it.
     if (f0.area_mm2 >= p.min_area_mm2) {
       const double m2 = median_inside(c, k0, f0.pts);
-      if (refine_on_seed_slice && std::isfinite(m2) && m2 >= p.seed_hu_lo && m2 <= p.seed_hu_hi &&
-          std::abs(m2 - mu) > 2.0) {
+      if (refine_on_seed_slice && seed_like(m2) && std::abs(m2 - mu) > 2.0) {
         mu = m2;
         std::tie(lo, hi) = window(mu);
         f0 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, p.region_open_mm);
@@ -719,8 +721,8 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
       if (d == 0 && sign > 0) continue;
       k0 = k_seed + sign * d;
       if (k0 < 0 || k0 >= K) continue;
-      const double m = d == 0 ? seed_med : median_inside(c, k0, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24));
-      if (!(m >= p.seed_hu_lo && m <= p.seed_hu_hi)) continue;
+      const double m = d == 0 ? seed_med : hu_at_seed(k0);
+      if (!seed_like(m)) continue;
       try {
         at = attempt(m, true);
         fitted = true;
@@ -752,8 +754,8 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
       for (int sign : {-1, 1}) {
         k0 = k_seed + sign * d;
         if (k0 < 0 || k0 >= K) continue;
-        const double m = median_inside(c, k0, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24));
-        if (!(m >= p.seed_hu_lo && m <= p.seed_hu_hi)) continue;
+        const double m = hu_at_seed(k0);
+        if (!seed_like(m)) continue;
         try {
           Attempt other = attempt(m, true);
           if (extent_mm(other) > extent_mm(at)) at = std::move(other), k_best = k0;
@@ -785,7 +787,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
       auto mid = v.begin() + std::ptrdiff_t(v.size() / 2);
       std::nth_element(v.begin(), mid, v.end());
       const double m3 = *mid;
-      if (m3 >= p.seed_hu_lo && m3 <= p.seed_hu_hi && std::abs(m3 - at.mu) > 1.5) {
+      if (seed_like(m3) && std::abs(m3 - at.mu) > 1.5) {
         try {
           Attempt second = attempt(m3, false);
           // A window a few HU away changes the outline a little; a second pass that loses a fifth
