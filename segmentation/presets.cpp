@@ -107,6 +107,7 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get(*t, organ, seen, "seed_slide_mm", p.seed_slide_mm);
     get(*t, organ, seen, "min_extent_mm", p.min_extent_mm);
     get(*t, organ, seen, "divide_span_mm", p.divide_span_mm);
+    get(*t, organ, seen, "divide_neck_slice_fraction", p.divide_neck_slice_fraction);
     get(*t, organ, seen, "shift_growth_ratio", p.shift_growth_ratio);
     get(*t, organ, seen, "max_shifted_fraction", p.max_shifted_fraction);
     get(*t, organ, seen, "shift_tolerance_mm", p.shift_tolerance_mm);

@@ -49,6 +49,10 @@ struct OrganPreset {
   double min_extent_mm = 0.0;
   /// Airway: a second air component under the lumen this far back (mm) also marks the carina.
   double divide_span_mm = 0.0;
+  /// Airway: one air component whose parts stay apart after an erosion of this fraction of the
+  /// slice thickness (two lobes joined by a neck narrower than twice that) is the divided lumen
+  /// seen through a thick slice's partial volume. 0 = off.
+  double divide_neck_slice_fraction = 0.0;
   double shift_growth_ratio = 1.25;
   double max_shifted_fraction = 1.0;
   double shift_tolerance_mm = 3.0;

@@ -877,11 +877,33 @@ AirSlice air_components(const SliceCtx& c, std::int64_t k, double air_hu) {
   return a;
 }
 
-void find_inner_point(const SliceCtx& c, const AirSlice& a, Component& q) {
+/// The component's pixels (255) in its bounding box with a one-pixel margin.
+cv::Mat component_mask(const AirSlice& a, const Component& q) {
   cv::Mat mask = cv::Mat::zeros(q.box.height + 2, q.box.width + 2, CV_8U);
   for (int y = 0; y < q.box.height; ++y)
     for (int x = 0; x < q.box.width; ++x)
       if (a.labels.at<int>(q.box.y + y, q.box.x + x) == q.id) mask.at<std::uint8_t>(y + 1, x + 1) = 255;
+  return mask;
+}
+
+/// Parts of at least min_part_mm2 left of an air component after an erosion by radius_mm (the
+/// pixels farther than that from its outside): two lumens joined by a neck narrower than
+/// 2 × radius_mm come apart, a round, D-shaped or compressed lumen stays one.
+int lobes_after_erosion(const SliceCtx& c, const AirSlice& a, const Component& q, double radius_mm,
+                        double min_part_mm2) {
+  cv::Mat dist;
+  cv::distanceTransform(component_mask(a, q), dist, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+  const double px_mm = std::sqrt(c.sx * c.sy);
+  cv::Mat core = dist > radius_mm / px_mm;
+  cv::Mat labels, stats, cents;
+  const int n = cv::connectedComponentsWithStats(core, labels, stats, cents, 8, CV_32S);
+  int parts = 0;
+  for (int i = 1; i < n; ++i) parts += stats.at<int>(i, cv::CC_STAT_AREA) * c.sx * c.sy >= min_part_mm2;
+  return parts;
+}
+
+void find_inner_point(const SliceCtx& c, const AirSlice& a, Component& q) {
+  cv::Mat mask = component_mask(a, q);
   cv::Mat d;
   cv::distanceTransform(mask, d, cv::DIST_L2, cv::DIST_MASK_PRECISE);
   double mx;
@@ -894,10 +916,7 @@ void find_inner_point(const SliceCtx& c, const AirSlice& a, Component& q) {
 /// Outline (slice mm) of an air component eroded by one pixel: the largest outer contour of the
 /// eroded mask, through pixel centres. Empty when nothing survives the erosion.
 std::vector<Point2> air_region_outline(const SliceCtx& c, const AirSlice& a, const Component& q) {
-  cv::Mat mask = cv::Mat::zeros(q.box.height + 2, q.box.width + 2, CV_8U);
-  for (int y = 0; y < q.box.height; ++y)
-    for (int x = 0; x < q.box.width; ++x)
-      if (a.labels.at<int>(q.box.y + y, q.box.x + x) == q.id) mask.at<std::uint8_t>(y + 1, x + 1) = 255;
+  cv::Mat mask = component_mask(a, q);
   cv::erode(mask, mask, cv::getStructuringElement(cv::MORPH_RECT, {3, 3}));
   std::vector<std::vector<cv::Point>> contours;
   cv::findContours(mask, contours, cv::RETR_EXTERNAL, cv::CHAIN_APPROX_NONE);
@@ -1033,6 +1052,18 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
         break;
       }
       comp = hits.front();
+      // A thick slice across the carina averages the two bronchi below it with the lumen above:
+      // at −500 HU they join through the ridge's partial volume, by a neck that narrows with the
+      // share of the slice below the ridge. Two lobes that an erosion of a fraction of the slice
+      // thickness parts are the divided lumen.
+      const double neck_mm = p.divide_neck_slice_fraction * g.spacing_mm.z();
+      if (neck_mm > 0 && lobes_after_erosion(c, a, comp, neck_mm, 0.25 * p.min_area_mm2) >= 2) {
+        char why[160];
+        std::snprintf(why, sizeof why, "stopped at slice %lld: the lumen divides (carina; two lobes joined by a neck under %.1f mm)",
+                      static_cast<long long>(k), 2 * neck_mm);
+        note = why;
+        break;
+      }
       if (comp.area_mm2 > p.max_area_ratio * prev_area) {
         note = "stopped at slice " + std::to_string(k) + ": the lumen widens into the bronchi or lungs";
         break;

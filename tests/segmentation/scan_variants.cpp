@@ -285,4 +285,33 @@ Score score_against(const LabelMap& ref, const LabelMap& test, std::uint8_t test
   return r;
 }
 
+LabelMap air_under_reference(const Scan& s, float air_hu) {
+  LabelMap m;
+  m.grid = s.ct.grid;
+  m.labels.assign(s.ct.hu.size(), 0);
+  const std::int64_t W = s.ct.grid.size_vox[0], H = s.ct.grid.size_vox[1], plane = W * H;
+  std::vector<std::int64_t> stack;
+  for (std::int64_t k = 0; k < s.ct.grid.size_vox[2]; ++k) {
+    const std::int64_t o = k * plane;
+    for (std::int64_t q = 0; q < plane; ++q)
+      if (s.ref.labels[std::size_t(o + q)] && s.ct.hu[std::size_t(o + q)] < air_hu && !m.labels[std::size_t(o + q)]) {
+        m.labels[std::size_t(o + q)] = 1;
+        stack.push_back(q);
+      }
+    while (!stack.empty()) {  // flood the slice's air from the reference's air pixels
+      const std::int64_t q = stack.back();
+      stack.pop_back();
+      const std::int64_t x = q % W, y = q / W;
+      for (const auto [dx, dy] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+        const std::int64_t nx = x + dx, ny = y + dy, n = ny * W + nx;
+        if (nx < 0 || ny < 0 || nx >= W || ny >= H || m.labels[std::size_t(o + n)] || !(s.ct.hu[std::size_t(o + n)] < air_hu))
+          continue;
+        m.labels[std::size_t(o + n)] = 1;
+        stack.push_back(n);
+      }
+    }
+  }
+  return m;
+}
+
 }  // namespace organsmith::testing

@@ -61,4 +61,10 @@ struct Score {
 };
 Score score_against(const LabelMap& ref, const LabelMap& test, std::uint8_t test_label);
 
+/// An airway reference's own rule applied to the scan's CT: on each slice the reference labels,
+/// the air (below air_hu) that is connected in the slice to the reference there (label 1). On
+/// a scan whose reference was drawn at that level this is the reference itself; on resampled
+/// slices it measures how far the interpolated CT and the interpolated reference disagree.
+LabelMap air_under_reference(const Scan& s, float air_hu);
+
 }  // namespace organsmith::testing

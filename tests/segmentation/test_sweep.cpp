@@ -67,6 +67,7 @@ std::vector<Variant> scan_variants(bool thin_slices) {
 struct Row {
   std::string variant;
   double dice = 0, volume_error = 0, seconds = 0;
+  double rule_dice = -1;  ///< airway: the reference's rule (−500 HU) on the variant's CT, against the reference
   std::string error;
 };
 
@@ -96,19 +97,25 @@ Row segment_and_score(const std::string& name, const Scan& raw, const std::strin
     }
     row.dice = sc.dice;
     row.volume_error = sc.volume_error;
+    if (organ == "trachea") row.rule_dice = score_against(s.ref, air_under_reference(s, -500.0f), 1).dice;
   } catch (const std::exception& e) {
     row.error = e.what();
   }
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf("| %-12s | %-26s | %.3f | %+6.1f %% | %5.2f s |%s\n", organ.c_str(), name.c_str(), row.dice,
-              100 * row.volume_error, row.seconds, row.error.empty() ? "" : (" " + row.error).c_str());
+  char rule[32] = "";
+  if (row.rule_dice >= 0) std::snprintf(rule, sizeof rule, " %.3f |", row.rule_dice);
+  std::printf("| %-12s | %-26s | %.3f | %+6.1f %% | %5.2f s |%s%s\n", organ.c_str(), name.c_str(), row.dice,
+              100 * row.volume_error, row.seconds, rule, row.error.empty() ? "" : (" " + row.error).c_str());
   std::fflush(stdout);
   return row;
 }
 
-/// Variants still short of the target, with the figure reached (issue 15 stays open on them):
-/// the sweep holds them at that figure, less 0.01, so that they cannot get worse unseen, and
-/// prints them as short. Every other variant must meet the target.
+/// Variants short of the issue's target, with the figure reached. The sweep holds them at that
+/// figure, less 0.01, so that they cannot get worse unseen, and prints them as short. Every other
+/// variant must meet the target. The trachea's resampled variants are interpolated from 8 mm
+/// slices, where the reference (labels box-averaged, ≥ ½) and the interpolated CT disagree: the
+/// reference's own rule (air below −500 HU, Dice 0.999 on the scan's own slices) reaches only
+/// 0.94–0.96 on them, so they are also held within kRuleMargin of that figure (README).
 struct Short {
   std::string case_name, organ, variant;
   double reached;
@@ -118,8 +125,9 @@ const std::vector<Short> kShortOfTarget = {
     {"chest-dicom-8mm", "trachea", "1.0 mm slices", 0.935},
     {"chest-dicom-8mm", "trachea", "2.0 mm slices", 0.939},
     {"chest-dicom-8mm", "trachea", "3.0 mm slices", 0.940},
-    {"chest-dicom-8mm", "trachea", "5.0 mm slices", 0.902},
+    {"chest-dicom-8mm", "trachea", "5.0 mm slices", 0.955},
 };
+constexpr double kRuleMargin = 0.015;
 
 void sweep(const std::string& case_name, const Scan& base, const std::string& organ, bool seeded, bool thin_slices,
            double absolute_floor) {
@@ -154,6 +162,9 @@ void sweep(const std::string& case_name, const Scan& base, const std::string& or
       ++short_count;
       std::printf("short of target (%.3f): %s, %s at %.3f\n", floor, case_name.c_str(), r.variant.c_str(), r.dice);
       EXPECT_GE(r.dice, known->reached - 0.01) << case_name << ", " << r.variant << " got worse";
+      if (r.rule_dice >= 0)
+        EXPECT_GE(r.dice, r.rule_dice - kRuleMargin) << case_name << ", " << r.variant << ": the reference's rule reaches "
+                                                     << r.rule_dice;
       continue;
     }
     EXPECT_TRUE(r.error.empty()) << case_name << ", " << r.variant << ": " << r.error;
@@ -456,26 +467,24 @@ TEST(MeshSweep, RealGallbladderVariantsPassEveryGate) {
   }
 }
 
-// The trachea's resampled variants are all interpolated from 8 mm slices: between two slices the
-// reference (box-averaged labels ≥ 0.5, the union at the mid-slices) and the interpolated CT
-// disagree by construction. A perfect segmentation (air exactly where the reference is, tissue
-// elsewhere) resampled the same way and cut at the airway's −500 HU gives the best Dice any
-// method can reach on these variants; the sweep's figures are compared with it in README.
-TEST(SegmentSweep, TracheaResampledVariantsBestReachableDice) {
+// The trachea's resampled variants are all interpolated from 8 mm slices. The reference was drawn
+// as the air below −500 HU: on the scan's own slices that rule gives it back (Dice ≥ 0.99). On
+// the resampled slices the same rule applied to the interpolated CT, on the reference's own
+// slices, is as far as the reference and the CT agree; the sweep holds the stage within
+// kRuleMargin of it, and this test checks that it is the rule and that 0.97 is past it.
+TEST(SegmentSweep, TracheaReferenceRuleOnResampledSlices) {
   ORGANSMITH_REQUIRE_REAL_DATA();
-  Scan oracle = real_scan("chest-dicom-8mm/dicom", "chest-dicom-8mm/trachea-reference.nii.gz");
-  for (std::size_t i = 0; i < oracle.ct.hu.size(); ++i) oracle.ct.hu[i] = oracle.ref.labels[i] ? -1000.0f : 40.0f;
-  double lowest = 1.0;
+  const Scan base = real_scan("chest-dicom-8mm/dicom", "chest-dicom-8mm/trachea-reference.nii.gz");
+  const double own = score_against(base.ref, air_under_reference(base, -500.0f), 1).dice;
+  std::printf("| trachea | own 8 mm slices | reference's rule: Dice %.3f |\n", own);
+  EXPECT_GE(own, 0.99) << "the reference is not the −500 HU air of its own slices";
+  double highest = 0;
   for (double t : {0.7, 1.0, 2.0, 3.0, 5.0}) {
-    const Scan s = resample_slices(oracle, t);
-    LabelMap m;
-    m.grid = s.ct.grid;
-    m.labels.assign(s.ct.hu.size(), 0);
-    for (std::size_t i = 0; i < s.ct.hu.size(); ++i) m.labels[i] = s.ct.hu[i] < -500.0f ? 1 : 0;
-    const double d = score_against(s.ref, m, 1).dice;
-    std::printf("| trachea | %.1f mm slices | best reachable Dice %.3f |\n", t, d);
-    lowest = std::min(lowest, d);
-    EXPECT_GT(d, 0.85);  // the construction itself is sound: a perfect answer scores high
+    const Scan s = resample_slices(base, t);
+    const double d = score_against(s.ref, air_under_reference(s, -500.0f), 1).dice;
+    std::printf("| trachea | %.1f mm slices | reference's rule: Dice %.3f |\n", t, d);
+    highest = std::max(highest, d);
   }
-  std::printf("lowest best-reachable Dice over the resampled trachea variants: %.3f (target 0.97)\n", lowest);
+  std::printf("highest Dice of the reference's rule over the resampled variants: %.3f (issue's target 0.97)\n", highest);
+  EXPECT_LT(highest, 0.97) << "the issue's target is reachable on these variants: take them off kShortOfTarget";
 }
