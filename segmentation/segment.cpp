@@ -886,20 +886,35 @@ cv::Mat component_mask(const AirSlice& a, const Component& q) {
   return mask;
 }
 
-/// Parts of at least min_part_mm2 left of an air component after an erosion by radius_mm (the
-/// pixels farther than that from its outside): two lumens joined by a neck narrower than
-/// 2 × radius_mm come apart, a round, D-shaped or compressed lumen stays one.
-int lobes_after_erosion(const SliceCtx& c, const AirSlice& a, const Component& q, double radius_mm,
-                        double min_part_mm2) {
+/// The parts of at least min_part_mm2 left of an air component on slice k after an erosion by
+/// radius_mm (the pixels farther than that from its outside), each lying at least half under
+/// `under` (a mask of the slice), as their LPS centres, largest first: two lumens joined by a
+/// neck narrower than 2 × radius_mm come apart, a round, D-shaped or compressed lumen stays one.
+std::vector<Eigen::Vector3d> lobes_after_erosion(const SliceCtx& c, std::int64_t k, const AirSlice& a,
+                                                 const Component& q, double radius_mm, double min_part_mm2,
+                                                 const cv::Mat& under) {
   cv::Mat dist;
   cv::distanceTransform(component_mask(a, q), dist, cv::DIST_L2, cv::DIST_MASK_PRECISE);
   const double px_mm = std::sqrt(c.sx * c.sy);
   cv::Mat core = dist > radius_mm / px_mm;
   cv::Mat labels, stats, cents;
   const int n = cv::connectedComponentsWithStats(core, labels, stats, cents, 8, CV_32S);
-  int parts = 0;
-  for (int i = 1; i < n; ++i) parts += stats.at<int>(i, cv::CC_STAT_AREA) * c.sx * c.sy >= min_part_mm2;
-  return parts;
+  std::vector<int> inside(static_cast<std::size_t>(n), 0);
+  for (int y = 1; y + 1 < labels.rows; ++y)
+    for (int x = 1; x + 1 < labels.cols; ++x)
+      if (const int l = labels.at<int>(y, x); l && under.at<std::uint8_t>(q.box.y + y - 1, q.box.x + x - 1))
+        ++inside[std::size_t(l)];
+  std::vector<std::pair<int, Eigen::Vector3d>> parts;
+  for (int i = 1; i < n; ++i) {
+    const int area = stats.at<int>(i, cv::CC_STAT_AREA);
+    if (area * c.sx * c.sy < min_part_mm2 || 2 * inside[std::size_t(i)] < area) continue;
+    const Eigen::Vector3d at(q.box.x + cents.at<double>(i, 0) - 1, q.box.y + cents.at<double>(i, 1) - 1, double(k));
+    parts.emplace_back(area, c.vol.grid.index_to_lps_mm(at));
+  }
+  std::sort(parts.begin(), parts.end(), [](const auto& x, const auto& y) { return x.first > y.first; });
+  std::vector<Eigen::Vector3d> out;
+  for (const auto& pr : parts) out.push_back(pr.second);
+  return out;
 }
 
 void find_inner_point(const SliceCtx& c, const AirSlice& a, Component& q) {
@@ -1038,31 +1053,50 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
         });
         for (const auto& [l, n] : here) overlap[l] = std::max(overlap[l], n);
       }
-      std::vector<Component> hits;
+      // Most overlap first.
+      std::vector<std::pair<int, Component>> hits;
       for (const auto& [l, n] : overlap) {
         const Component& q = a.comps[std::size_t(l - 1)];
-        if (q.area_mm2 >= 0.25 * p.min_area_mm2 && !q.touches_border) hits.push_back(q);
+        if (q.area_mm2 >= 0.25 * p.min_area_mm2 && !q.touches_border) hits.emplace_back(n, q);
       }
+      std::stable_sort(hits.begin(), hits.end(), [](const auto& x, const auto& y) { return x.first > y.first; });
       if (hits.empty()) {
         note = "stopped at slice " + std::to_string(k) + ": the lumen ends";
         break;
       }
-      if (hits.size() >= 2) {
+      // The main bronchi leave the carina side by side, left and right. A second air region under
+      // the lumen behind or in front of it (the oesophagus, joined to the lumen on the slice
+      // above through a thin wall) is left out and the lumen followed on.
+      const auto lps = [&](const Point2& at_mm) { return g.index_to_lps_mm({at_mm.x / c.sx, at_mm.y / c.sy, double(k)}); };
+      const auto side_by_side = [](const Eigen::Vector3d& u, const Eigen::Vector3d& v) {
+        const Eigen::Vector3d d = v - u;
+        return std::abs(d.x()) >= std::hypot(d.y(), d.z());
+      };
+      if (hits.size() >= 2 && side_by_side(lps(hits[0].second.centroid_mm), lps(hits[1].second.centroid_mm))) {
         note = "stopped at slice " + std::to_string(k) + ": the lumen divides (carina)";
         break;
       }
-      comp = hits.front();
+      comp = hits.front().second;
       // A thick slice across the carina averages the two bronchi below it with the lumen above:
       // at −500 HU they join through the ridge's partial volume, by a neck that narrows with the
       // share of the slice below the ridge. Two lobes that an erosion of a fraction of the slice
-      // thickness parts are the divided lumen.
+      // thickness parts, each under the lumen above and side by side left–right as the main
+      // bronchi leave the carina, are the divided lumen; air joined behind or in front of the
+      // lumen (the oesophagus through a thin wall) is not.
       const double neck_mm = p.divide_neck_slice_fraction * g.spacing_mm.z();
-      if (neck_mm > 0 && lobes_after_erosion(c, a, comp, neck_mm, 0.25 * p.min_area_mm2) >= 2) {
-        char why[160];
-        std::snprintf(why, sizeof why, "stopped at slice %lld: the lumen divides (carina; two lobes joined by a neck under %.1f mm)",
-                      static_cast<long long>(k), 2 * neck_mm);
-        note = why;
-        break;
+      if (neck_mm > 0) {
+        cv::Mat under = cv::Mat::zeros(c.H, c.W, CV_8U);
+        seg::rasterise(to_px(c, prev_pts), c.W, c.H, [&](int x, int y) { under.at<std::uint8_t>(y, x) = 1; });
+        const auto lobes = lobes_after_erosion(c, k, a, comp, neck_mm, 0.25 * p.min_area_mm2, under);
+        if (lobes.size() >= 2 && side_by_side(lobes[0], lobes[1])) {
+          char why[160];
+          std::snprintf(why, sizeof why,
+                        "stopped at slice %lld: the lumen divides (carina; two lobes side by side joined by a neck "
+                        "under %.1f mm)",
+                        static_cast<long long>(k), 2 * neck_mm);
+          note = why;
+          break;
+        }
       }
       if (comp.area_mm2 > p.max_area_ratio * prev_area) {
         note = "stopped at slice " + std::to_string(k) + ": the lumen widens into the bronchi or lungs";

@@ -345,6 +345,54 @@ TEST(SegmentSweep, RealTrachea) {
   sweep("chest-dicom-8mm", s, "trachea", false, true, 0.97);
 }
 
+// The carina on thick slices: the sweep's 5 mm variant stops where the two bronchi, joined by a
+// neck through the ridge's partial volume, come apart under an erosion. Air behind the lumen
+// joined to it the same way (the oesophagus, through a thin wall), and the same air once the
+// wall closes, under the contour that took it in above, are no carina: the stage must still
+// follow the trachea down to the same slice.
+TEST(SegmentSweep, AirJoinedBehindTheTracheaOnThickSlicesIsNotTheCarina) {
+  ORGANSMITH_REQUIRE_REAL_DATA();
+  const Scan base = resample_slices(real_scan("chest-dicom-8mm/dicom", "chest-dicom-8mm/trachea-reference.nii.gz"), 5.0);
+  NullProgress np;
+  const OrganSegmentation plain = segment_organs(base.ct, {OrganRequest{"trachea", {}, {}}}, {}, np).organs[0];
+  Scan s = base;
+  const ImageGrid& g = s.ct.grid;
+  const std::int64_t W = g.size_vox[0], H = g.size_vox[1];
+  int painted = 0;
+  for (std::int64_t k = plain.first_slice + 2; k <= plain.last_slice; ++k) {
+    // The reference's centre and its most posterior point on this slice.
+    double sum_l = 0, sum_p = 0, max_p = -1e9;
+    int n = 0;
+    for (std::int64_t j = 0; j < H; ++j)
+      for (std::int64_t i = 0; i < W; ++i)
+        if (s.ref.at(i, j, k)) {
+          const Eigen::Vector3d x = g.index_to_lps_mm(Eigen::Vector3d(double(i), double(j), double(k)));
+          sum_l += x.x(), sum_p += x.y(), max_p = std::max(max_p, x.y()), ++n;
+        }
+    if (!n) continue;
+    // A pocket of air 8 mm across, 2 mm behind the lumen, joined to it by a 1.5 mm wide channel
+    // from the lumen's centre.
+    const double l0 = sum_l / n, p0 = max_p + 2.0 + 4.0;
+    for (std::int64_t j = 0; j < H; ++j)
+      for (std::int64_t i = 0; i < W; ++i) {
+        const Eigen::Vector3d x = g.index_to_lps_mm(Eigen::Vector3d(double(i), double(j), double(k)));
+        const bool pocket = std::hypot(x.x() - l0, x.y() - p0) <= 4.0;
+        // On the two most caudal of these slices the wall between them closes: a separate pocket.
+        const bool channel = k > plain.first_slice + 3 && std::abs(x.x() - l0) <= 0.75 && x.y() >= sum_p / n && x.y() <= p0;
+        if (pocket || channel) s.ct.hu[std::size_t(g.offset(i, j, k))] = -950.0f;
+      }
+    ++painted;
+  }
+  ASSERT_GE(painted, 10);
+  const OrganSegmentation joined = segment_organs(s.ct, {OrganRequest{"trachea", {}, {}}}, {}, np).organs[0];
+  std::printf("trachea slices %lld–%lld (%s); with air joined behind it on %d slices: %lld–%lld (%s)\n",
+              static_cast<long long>(plain.first_slice), static_cast<long long>(plain.last_slice),
+              plain.notes.back().c_str(), painted, static_cast<long long>(joined.first_slice),
+              static_cast<long long>(joined.last_slice), joined.notes.back().c_str());
+  EXPECT_EQ(joined.first_slice, plain.first_slice);
+  EXPECT_EQ(joined.last_slice, plain.last_slice);
+}
+
 TEST(SegmentSweep, PhantomGallbladder) {
   sweep("phantom 256x256x160", phantom_scan(std::uint8_t(Label::gallbladder), "gallbladder"), "gallbladder", true, false, 0);
 }
