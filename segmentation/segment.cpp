@@ -887,9 +887,12 @@ cv::Mat component_mask(const AirSlice& a, const Component& q) {
 }
 
 /// The parts of at least min_part_mm2 left of an air component on slice k after an erosion by
-/// radius_mm (the pixels farther than that from its outside), each lying at least half under
-/// `under` (a mask of the slice), as their LPS centres, largest first: two lumens joined by a
-/// neck narrower than 2 × radius_mm come apart, a round, D-shaped or compressed lumen stays one.
+/// radius_mm (the pixels whose centres lie farther than that from the nearest pixel outside;
+/// square pixels, their geometric mean otherwise), each at least twice as wide as what parted
+/// it (inscribed radius ≥ 2 × radius_mm) and lying at least half under `under` (a mask of the
+/// slice), as their LPS centres, largest first: two lumens joined by a neck narrower than
+/// 2 × radius_mm come apart; a round, D-shaped or compressed lumen stays one, and a crescent
+/// (the posterior wall bulging in) that thins to a neck leaves horns too narrow to count.
 std::vector<Eigen::Vector3d> lobes_after_erosion(const SliceCtx& c, std::int64_t k, const AirSlice& a,
                                                  const Component& q, double radius_mm, double min_part_mm2,
                                                  const cv::Mat& under) {
@@ -900,14 +903,20 @@ std::vector<Eigen::Vector3d> lobes_after_erosion(const SliceCtx& c, std::int64_t
   cv::Mat labels, stats, cents;
   const int n = cv::connectedComponentsWithStats(core, labels, stats, cents, 8, CV_32S);
   std::vector<int> inside(static_cast<std::size_t>(n), 0);
+  std::vector<float> widest(static_cast<std::size_t>(n), 0.0f);  // inscribed radius, pixels
   for (int y = 1; y + 1 < labels.rows; ++y)
-    for (int x = 1; x + 1 < labels.cols; ++x)
-      if (const int l = labels.at<int>(y, x); l && under.at<std::uint8_t>(q.box.y + y - 1, q.box.x + x - 1))
-        ++inside[std::size_t(l)];
+    for (int x = 1; x + 1 < labels.cols; ++x) {
+      const int l = labels.at<int>(y, x);
+      if (!l) continue;
+      widest[std::size_t(l)] = std::max(widest[std::size_t(l)], dist.at<float>(y, x));
+      if (under.at<std::uint8_t>(q.box.y + y - 1, q.box.x + x - 1)) ++inside[std::size_t(l)];
+    }
   std::vector<std::pair<int, Eigen::Vector3d>> parts;
   for (int i = 1; i < n; ++i) {
     const int area = stats.at<int>(i, cv::CC_STAT_AREA);
-    if (area * c.sx * c.sy < min_part_mm2 || 2 * inside[std::size_t(i)] < area) continue;
+    if (area * c.sx * c.sy < min_part_mm2 || 2 * inside[std::size_t(i)] < area ||
+        widest[std::size_t(i)] * px_mm < 2 * radius_mm)
+      continue;
     const Eigen::Vector3d at(q.box.x + cents.at<double>(i, 0) - 1, q.box.y + cents.at<double>(i, 1) - 1, double(k));
     parts.emplace_back(area, c.vol.grid.index_to_lps_mm(at));
   }
@@ -1072,7 +1081,14 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
         const Eigen::Vector3d d = v - u;
         return std::abs(d.x()) >= std::hypot(d.y(), d.z());
       };
-      if (hits.size() >= 2 && side_by_side(lps(hits[0].second.centroid_mm), lps(hits[1].second.centroid_mm))) {
+      const auto divides = [&](const std::vector<Eigen::Vector3d>& at) {  // at[0] beside any other
+        for (std::size_t j = 1; j < at.size(); ++j)
+          if (side_by_side(at[0], at[j])) return true;
+        return false;
+      };
+      std::vector<Eigen::Vector3d> hit_at;
+      for (const auto& h : hits) hit_at.push_back(lps(h.second.centroid_mm));
+      if (divides(hit_at)) {
         note = "stopped at slice " + std::to_string(k) + ": the lumen divides (carina)";
         break;
       }
@@ -1088,7 +1104,7 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
         cv::Mat under = cv::Mat::zeros(c.H, c.W, CV_8U);
         seg::rasterise(to_px(c, prev_pts), c.W, c.H, [&](int x, int y) { under.at<std::uint8_t>(y, x) = 1; });
         const auto lobes = lobes_after_erosion(c, k, a, comp, neck_mm, 0.25 * p.min_area_mm2, under);
-        if (lobes.size() >= 2 && side_by_side(lobes[0], lobes[1])) {
+        if (divides(lobes)) {
           char why[160];
           std::snprintf(why, sizeof why,
                         "stopped at slice %lld: the lumen divides (carina; two lobes side by side joined by a neck "
