@@ -1040,6 +1040,14 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
   std::vector<Point2> prev_pts;
   double prev_area = 0;
   std::string note = "reached the last slice";
+  // Whether at[0] (LPS) lies beside any other of `at`, left or right rather than behind or above.
+  const auto divides = [](const std::vector<Eigen::Vector3d>& at) {
+    for (std::size_t j = 1; j < at.size(); ++j) {
+      const Eigen::Vector3d d = at[j] - at[0];
+      if (std::abs(d.x()) >= std::hypot(d.y(), d.z())) return true;
+    }
+    return false;
+  };
   for (std::size_t oi = start; oi < order.size(); ++oi) {
     progress.check_cancelled();
     progress.report(0.3 + 0.7 * double(oi - start) / double(order.size() - start), "segmenting trachea");
@@ -1053,10 +1061,13 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
       // thin slices the bronchi part gradually, and the second one may appear only once the
       // contour above has already narrowed to the first.
       std::map<int, int> overlap;
+      cv::Mat under = cv::Mat::zeros(c.H, c.W, CV_8U);  // the previous lumen
       const std::size_t back = std::size_t(std::max(1.0, std::floor(p.divide_span_mm / g.spacing_mm.z() + 1e-9)));
       for (const auto* pts : {&prev_pts, &acc[acc.size() > back ? acc.size() - back : 0].pts}) {
         std::map<int, int> here;
+        const bool is_prev = pts == &prev_pts;
         seg::rasterise(to_px(c, *pts), c.W, c.H, [&](int x, int y) {
+          if (is_prev) under.at<std::uint8_t>(y, x) = 1;
           const int l = a.labels.at<int>(y, x);
           if (l) ++here[l];
         });
@@ -1076,18 +1087,9 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
       // The main bronchi leave the carina side by side, left and right. A second air region under
       // the lumen behind or in front of it (the oesophagus, joined to the lumen on the slice
       // above through a thin wall) is left out and the lumen followed on.
-      const auto lps = [&](const Point2& at_mm) { return g.index_to_lps_mm({at_mm.x / c.sx, at_mm.y / c.sy, double(k)}); };
-      const auto side_by_side = [](const Eigen::Vector3d& u, const Eigen::Vector3d& v) {
-        const Eigen::Vector3d d = v - u;
-        return std::abs(d.x()) >= std::hypot(d.y(), d.z());
-      };
-      const auto divides = [&](const std::vector<Eigen::Vector3d>& at) {  // at[0] beside any other
-        for (std::size_t j = 1; j < at.size(); ++j)
-          if (side_by_side(at[0], at[j])) return true;
-        return false;
-      };
       std::vector<Eigen::Vector3d> hit_at;
-      for (const auto& h : hits) hit_at.push_back(lps(h.second.centroid_mm));
+      for (const auto& h : hits)
+        hit_at.push_back(g.index_to_lps_mm({h.second.centroid_mm.x / c.sx, h.second.centroid_mm.y / c.sy, double(k)}));
       if (divides(hit_at)) {
         note = "stopped at slice " + std::to_string(k) + ": the lumen divides (carina)";
         break;
@@ -1101,8 +1103,6 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
       // lumen (the oesophagus through a thin wall) is not.
       const double neck_mm = p.divide_neck_slice_fraction * g.spacing_mm.z();
       if (neck_mm > 0) {
-        cv::Mat under = cv::Mat::zeros(c.H, c.W, CV_8U);
-        seg::rasterise(to_px(c, prev_pts), c.W, c.H, [&](int x, int y) { under.at<std::uint8_t>(y, x) = 1; });
         const auto lobes = lobes_after_erosion(c, k, a, comp, neck_mm, 0.25 * p.min_area_mm2, under);
         if (divides(lobes)) {
           char why[160];
