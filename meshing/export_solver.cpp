@@ -62,13 +62,29 @@ struct ResolvedScenario {
   std::string fixed_nodes, pressure_surface;
   double pressure_MPa = 0.0;
   std::vector<std::string> inactive;
+  // Indentation: the probe's node set and its displacement at the end of the step (LPS mm).
+  std::string probe_nodes;
+  Eigen::Vector3d probe_u_mm{0, 0, 0};
+  double probe_depth_mm = 0.0;
 };
 ResolvedScenario resolve(const SolverModel& m, const SolverScenario& s) {
   ResolvedScenario r;
   if (s.fixed_surface.empty()) return r;
   const std::string fixed = m.organ + "_" + s.fixed_surface, loaded = m.organ + "_" + s.pressure_surface;
   // A model whose surfaces could not be found (its notes say why) is written without a load step.
-  if (!m.surfaces.count(fixed) || !m.surfaces.count(loaded)) return r;
+  if (!m.surfaces.count(fixed)) return r;
+  if (s.indentation) {
+    if (!m.probe || !m.surfaces.count(m.organ + "_probe")) return r;
+    r.fixed_nodes = fixed + "_nodes";
+    r.probe_nodes = m.organ + "_probe_nodes";
+    // Depth to 0.1 mm: the file states it as a reader would.
+    double depth = s.probe_depth_mm > 0 ? s.probe_depth_mm : kProbeDepthFraction * m.probe->thickness_mm;
+    if (!(depth > 0)) depth = m.probe->diameter_mm;
+    r.probe_depth_mm = std::max(0.1, std::round(depth * 10.0) / 10.0);
+    r.probe_u_mm = r.probe_depth_mm * m.probe->direction_lps;
+    return r;
+  }
+  if (!m.surfaces.count(loaded)) return r;
   r.fixed_nodes = fixed + "_nodes";
   r.pressure_surface = loaded;
   r.pressure_MPa = s.pressure_kPa * 1e-3;
@@ -331,7 +347,28 @@ void write_inp(const SolverModel& m, const std::map<std::string, SolverMaterial>
     }
     s += "*SOLID SECTION, ELSET=" + name + ", MATERIAL=" + name + "_MAT\n";
   }
-  if (!sc.fixed_nodes.empty()) {
+  if (!sc.probe_nodes.empty()) {
+    const SolverProbe& p = *m.probe;
+    const Eigen::Vector3d at = out_point(p.point_lps_mm, ras), dir = out_point(p.direction_lps, ras),
+                          u = out_point(sc.probe_u_mm, ras);  // out_point flips x, y for RAS: a rotation
+    s += "** Load case: " + sc.fixed_nodes.substr(0, sc.fixed_nodes.size() - 6) + " fixed; the thesis' indentation test "
+         "(section 5.1.2): a rigid " + num(p.diameter_mm) + " mm probe bonded to " + m.organ + "_probe pressed " +
+         num(sc.probe_depth_mm) + " mm along the inward normal, displacement-controlled, both regions active.\n";
+    // Read back by organsmith simulate (read_solver_inp); the frame is the file's.
+    s += "** organsmith probe: point " + inp_num(at.x()) + " " + inp_num(at.y()) + " " + inp_num(at.z()) + "; direction " +
+         inp_num(dir.x()) + " " + inp_num(dir.y()) + " " + inp_num(dir.z()) + "; diameter " + num(p.diameter_mm) +
+         "; depth " + num(sc.probe_depth_mm) + "; area " + num(p.contact_area_mm2) + "; thickness " + num(p.thickness_mm) + "\n";
+    // At most 5 % of the depth per increment: the force–depth curve gets at least 20 points.
+    s += "*STEP, NLGEOM, INC=1000\n*STATIC\n0.02, 1.0, 1e-06, 0.05\n";
+    s += "*CONTROLS, PARAMETERS=TIME INCREMENTATION\n4, 8, 9, 16, 10, 4, 0, 20\n";
+    s += "*BOUNDARY\n" + sc.fixed_nodes + ", 1, 3\n";
+    s += "*BOUNDARY\n";
+    for (int k = 0; k < 3; ++k)
+      s += sc.probe_nodes + ", " + std::to_string(k + 1) + ", " + std::to_string(k + 1) + ", " + inp_num(u[k]) + "\n";
+    s += "*NODE FILE\nU\n*EL FILE\nS\n";
+    s += "*NODE PRINT, NSET=" + sc.fixed_nodes + ", TOTALS=ONLY\nRF\n";
+    s += "*NODE PRINT, NSET=" + sc.probe_nodes + ", TOTALS=ONLY\nRF\n*END STEP\n";
+  } else if (!sc.fixed_nodes.empty()) {
     s += "** Load case: " + sc.fixed_nodes.substr(0, sc.fixed_nodes.size() - 6) + " fixed; uniform pressure " +
          num(scenario.pressure_kPa) + " kPa on " + sc.pressure_surface + " (ramped over the step).\n";
     // Small first increment and up to 20 cutbacks per increment: the tissue laws stiffen steeply
@@ -467,7 +504,22 @@ void write_feb(const SolverModel& m, const std::map<std::string, SolverMaterial>
     }
     s += "  </MeshData>\n";
   }
-  if (!sc.fixed_nodes.empty()) {
+  if (!sc.probe_nodes.empty()) {
+    const Eigen::Vector3d u = out_point(sc.probe_u_mm, ras);
+    s += "  <!-- the thesis' indentation test (section 5.1.2): a rigid " + num(m.probe->diameter_mm) + " mm probe bonded to " +
+         xml_escape(m.organ) + "_probe, pressed " + num(sc.probe_depth_mm) + " mm along the inward normal -->\n";
+    s += "  <Boundary>\n    <bc name=\"fixed\" type=\"zero displacement\" node_set=\"" + xml_escape(sc.fixed_nodes) +
+         "\">\n      <x_dof>1</x_dof>\n      <y_dof>1</y_dof>\n      <z_dof>1</z_dof>\n    </bc>\n";
+    const char* dof[3] = {"x", "y", "z"};
+    for (int k = 0; k < 3; ++k)
+      s += "    <bc name=\"probe_" + std::string(dof[k]) + "\" type=\"prescribed displacement\" node_set=\"" +
+           xml_escape(sc.probe_nodes) + "\">\n      <dof>" + dof[k] + "</dof>\n      <value lc=\"1\">" + num(u[k]) +
+           "</value>\n      <relative>0</relative>\n    </bc>\n";
+    s += "  </Boundary>\n";
+    s += "  <LoadData>\n    <load_controller id=\"1\" name=\"ramp\" type=\"loadcurve\">\n      <interpolate>LINEAR</interpolate>\n"
+         "      <extend>CONSTANT</extend>\n      <points>\n        <point>0,0</point>\n        <point>1,1</point>\n"
+         "      </points>\n    </load_controller>\n  </LoadData>\n";
+  } else if (!sc.fixed_nodes.empty()) {
     s += "  <Boundary>\n    <bc name=\"fixed\" type=\"zero displacement\" node_set=\"" + xml_escape(sc.fixed_nodes) +
          "\">\n      <x_dof>1</x_dof>\n      <y_dof>1</y_dof>\n      <z_dof>1</z_dof>\n    </bc>\n  </Boundary>\n";
     s += "  <Loads>\n    <surface_load name=\"pressure\" type=\"pressure\" surface=\"" + xml_escape(sc.pressure_surface) +

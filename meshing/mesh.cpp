@@ -544,6 +544,12 @@ OrganMesh mesh_one(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOpti
       out.warnings.push_back(spec.name + ": removed " + std::to_string(fix.peeled_tets) +
                              " flat tetrahedra lying on the surface (below the quality gate)");
     transform_to_lps(lm.grid, out.volume);
+    if (spec.model == OrganModel::tube && spec.rings.pitch_mm > 0) {
+      split_tube_wall(out.volume, spec.rings);
+      out.region_names.erase(kRegionTracheaWall);
+      out.region_names[kRegionTubeCartilage] = spec.name + "_cartilage";
+      out.region_names[kRegionTubeMembrane] = spec.name + "_membrane";
+    }
     TetGuarantees tg;
     tg.min_dihedral_deg = o.min_dihedral_deg;
     tg.max_radius_edge = o.max_radius_edge;

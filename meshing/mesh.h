@@ -15,6 +15,7 @@
 #include "core/progress.h"
 #include "core/volume.h"
 #include "meshing/quality.h"
+#include "meshing/tube_regions.h"
 
 #include <cstdint>
 #include <map>
@@ -36,6 +37,15 @@ struct MeshOrganSpec {
   std::uint8_t label = 0;
   OrganModel model = OrganModel::solid;
   double wall_mm = 0.0;  ///< wall thickness for wall_body and tube (mm); ignored for solid
+  /// tube: the wall as cartilage rings and membrane (regions <name>_cartilage, <name>_membrane);
+  /// pitch 0 = one region <name>_wall.
+  TubeRings rings;
+  /// The organ's default load case in the solver files (organ registry `load_case`):
+  /// "indentation" (wall_body: the thesis' 5 mm probe, §5.1.2), "pressure" (lumen pressure), or ""
+  /// (none).
+  std::string load_case;
+  double pressure_kPa = 0.0;       ///< lumen pressure of the pressure load case, kPa
+  double probe_diameter_mm = 5.0;  ///< diameter of the indentation probe, mm
 };
 
 /// Options of `mesh_organs`.

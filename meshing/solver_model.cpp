@@ -113,15 +113,15 @@ Eigen::Vector3d SolverModel::face_area_out_mm2(const SolverFace& f) const {
 
 SolverScenario default_scenario(const MeshOrganSpec& spec) {
   SolverScenario s;
+  if (spec.load_case.empty()) return s;
+  s.pressure_surface = "lumen";
+  s.pressure_kPa = spec.pressure_kPa;
   if (spec.model == OrganModel::wall_body) {
     s.fixed_surface = "liver_bed";
-    s.pressure_surface = "lumen";
-    s.pressure_kPa = 1.5;
-    s.inactive_regions = {spec.name + "_body"};
+    s.indentation = spec.load_case == "indentation";
+    if (!s.indentation) s.inactive_regions = {spec.name + "_body"};
   } else if (spec.model == OrganModel::tube) {
     s.fixed_surface = "cuts";
-    s.pressure_surface = "lumen";
-    s.pressure_kPa = 2.0;
   }
   return s;
 }
@@ -398,6 +398,8 @@ SolverModel build_solver_model(const OrganMesh& organ, const SolverModelOptions&
       }
     }
   }
+  if (organ.spec.model == OrganModel::wall_body && m.surfaces.count(n + "_liver_bed"))
+    add_indentation_probe(m, o.probe_lps_mm, organ.spec.probe_diameter_mm);
   for (const auto& [name, fs] : m.surfaces) {
     std::set<std::int32_t> ids;
     for (const auto& f : fs)

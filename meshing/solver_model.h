@@ -29,20 +29,40 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
 namespace organsmith {
 
-/// The organ's default analysis (thesis §5.1.1; §5.2.1): a fixed surface and a pressure on
-/// another, in a nonlinear static step.
+/// The organ's analysis in a nonlinear static step: a fixed surface and either a pressure on
+/// another (thesis §5.2.1) or the thesis' indentation (§5.1.2): a rigid flat probe pressed into
+/// the free surface along its inward normal, displacement-controlled.
 struct SolverScenario {
-  std::string fixed_surface;      ///< suffix of the fixed surface ("liver_bed", "cuts")
+  std::string fixed_surface;      ///< suffix of the fixed surface ("liver_bed", "cuts"); "" = no step
+  bool indentation = false;       ///< the probe instead of a pressure
   std::string pressure_surface;   ///< suffix of the loaded surface ("lumen")
   double pressure_kPa = 0.0;      ///< uniform pressure; positive inflates the lumen
-  /// Regions that carry no load in this scenario (the gallbladder body: the bile's pressure acts
-  /// on the wall). Written as a *MODEL CHANGE removal in the step.
+  /// Regions that carry no load in this scenario (the gallbladder body under bile pressure: the
+  /// pressure acts on the wall). Written as a *MODEL CHANGE removal in the step.
   std::vector<std::string> inactive_regions;
+  /// Indentation depth, mm; 0 = kProbeDepthFraction of the organ's thickness under the probe.
+  double probe_depth_mm = 0.0;
+};
+
+/// The automatic indentation depth as a fraction of the organ's thickness along the probe.
+inline constexpr double kProbeDepthFraction = 0.25;
+
+/// The indentation probe on a model: where it touches, along which direction it presses, and
+/// the faces it holds (the surface <organ>_probe and node set <organ>_probe_nodes). The probe is
+/// a rigid flat disc bonded to the wall under it: every node of those faces moves with it.
+struct SolverProbe {
+  Eigen::Vector3d point_lps_mm{0, 0, 0};   ///< on the outer surface
+  Eigen::Vector3d direction_lps{0, 0, 1};  ///< unit, into the organ (the inward surface normal)
+  double diameter_mm = 5.0;
+  double contact_area_mm2 = 0.0;           ///< area of the faces it holds
+  double thickness_mm = 0.0;               ///< the organ's thickness along the direction from the point
+  double requested_offset_mm = 0.0;        ///< distance from a requested point to the surface point used
 };
 
 struct SolverModelOptions {
@@ -55,6 +75,9 @@ struct SolverModelOptions {
   /// `bed_direction_lps`.
   std::function<double(const Eigen::Vector3d&)> liver_bed_score;
   std::string liver_bed_source;
+  /// wall_body: where the indentation probe touches (snapped to the free outer surface); empty =
+  /// the centre of the free surface opposite the liver bed. Its diameter comes from the spec.
+  std::optional<Eigen::Vector3d> probe_lps_mm;
 };
 
 struct SolverFace {
@@ -72,6 +95,7 @@ struct SolverModel {
   std::map<std::string, std::vector<SolverFace>> surfaces;
   std::map<std::string, std::vector<std::int32_t>> node_sets;   ///< sorted, 0-based
   std::vector<std::string> notes;                 ///< how surfaces were found (for file comments)
+  std::optional<SolverProbe> probe;               ///< wall_body with a liver bed: the indentation probe
 
   int nodes_per_element() const { return quadratic ? 10 : 4; }
   /// Node ids (0-based) of face `f` of element `e`: 3 corners, then (quadratic) the 3 mid-edge
@@ -85,9 +109,14 @@ struct SolverModel {
 /// surface its model needs cannot be found (naming which).
 SolverModel build_solver_model(const OrganMesh& organ, const SolverModelOptions& options = {});
 
-/// The default scenario of an organ model: wall_body → liver bed fixed, 1.5 kPa in the lumen
-/// (biliary pressure), body inactive; tube → both cut faces fixed, 2 kPa in the lumen (airway
-/// pressure in ventilation); solid → none (empty fixed_surface).
+/// The default scenario of an organ model, from its spec (organ registry `load_case`):
+/// wall_body → liver bed fixed, and the probe (indentation) or `pressure_kPa` in the lumen with
+/// the body inactive (pressure); tube → both cut faces fixed, `pressure_kPa` in the lumen;
+/// solid or no load case → none (empty fixed_surface).
 SolverScenario default_scenario(const MeshOrganSpec& spec);
+
+/// Places the indentation probe on a wall_body model whose surfaces are built (called by
+/// build_solver_model): adds the surface <organ>_probe and sets `m.probe`; a note says where.
+void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>& requested_lps_mm, double diameter_mm);
 
 }  // namespace organsmith

@@ -24,7 +24,9 @@ namespace fs = std::filesystem;
 std::vector<std::string> OrganInfo::regions() const {
   switch (mesh) {
     case OrganMeshModel::wall_body: return {name + "_wall", name + "_body"};
-    case OrganMeshModel::tube: return {name + "_wall"};
+    case OrganMeshModel::tube:
+      if (rings.pitch_mm > 0) return {name + "_cartilage", name + "_membrane"};
+      return {name + "_wall"};
     case OrganMeshModel::solid: return {name};
     case OrganMeshModel::none: break;
   }
@@ -105,7 +107,8 @@ std::string line_of(const toml::node& n) {
 const std::vector<std::string> kKeys = {"label",          "needs_seed",     "mesh",
                                         "wall_mm",        "materials",      "haptic_surface",
                                         "haptic_region",  "haptic_max_strain", "colour",
-                                        "opacity",        "segment"};
+                                        "opacity",        "segment",        "rings",
+                                        "load_case",      "pressure_kPa",   "probe_diameter_mm"};
 
 void parse_organ(const std::string& name, const toml::table& t, OrganInfo& o, const fs::path& origin) {
   auto fail = [&](const toml::node& n, const std::string& key, const std::string& what, const std::string& hint) {
@@ -148,6 +151,29 @@ void parse_organ(const std::string& name, const toml::table& t, OrganInfo& o, co
     v = *x;
   };
   number("wall_mm", o.wall_mm, 0.1, 20.0, "mm");
+  number("pressure_kPa", o.pressure_kPa, 0.0, 100.0, "kPa");
+  number("probe_diameter_mm", o.probe_diameter_mm, 0.5, 50.0, "mm");
+  if (const toml::node* n = t.get("load_case")) {
+    const auto v = n->value_exact<std::string>();
+    if (!v || (*v != "indentation" && *v != "pressure" && *v != "none"))
+      fail(*n, "load_case", "must be \"indentation\", \"pressure\" or \"none\"", "see data/organs.toml");
+    o.load_case = *v == "none" ? "" : *v;
+  }
+  if (const toml::node* n = t.get("rings")) {
+    const toml::table* r = n->as_table();
+    if (!r) fail(*n, "rings", "must be a table { pitch_mm, height_mm, cartilage_arc_deg }", "see data/organs.toml");
+    for (const auto& [k, v] : *r) {
+      const std::string key(k.str());
+      double* dst = key == "pitch_mm" ? &o.rings.pitch_mm : key == "height_mm" ? &o.rings.height_mm
+                    : key == "cartilage_arc_deg" ? &o.rings.cartilage_arc_deg : nullptr;
+      const auto x = v.value<double>();
+      if (!dst) fail(v, "rings." + key, "is not a key of rings", "keys: pitch_mm, height_mm, cartilage_arc_deg");
+      if (!x || !std::isfinite(*x) || *x < 0 || *x > 360) fail(v, "rings." + key, "must be a number from 0 to 360", "");
+      *dst = *x;
+    }
+    if (o.rings.pitch_mm > 0 && !(o.rings.height_mm > 0 && o.rings.height_mm < o.rings.pitch_mm))
+      fail(*n, "rings", "needs 0 < height_mm < pitch_mm", "e.g. rings = { pitch_mm = 6.1, height_mm = 4.0, cartilage_arc_deg = 270 }");
+  }
   number("haptic_max_strain", o.haptic_max_strain, 0.01, 2.0, "");
   number("opacity", o.opacity, 0.0, 1.0, "");
   auto text = [&](const char* key, std::string& v) {
@@ -207,6 +233,14 @@ void check_organ(const OrganInfo& o, const fs::path& origin) {
       fail("materials names region '" + region + "', which its mesh model (" +
                std::string(mesh_model_name(o.mesh)) + ") does not have",
            regions.empty() ? "an organ with mesh = \"none\" takes no materials" : "regions: " + list(regions));
+  if (o.rings.pitch_mm > 0 && o.mesh != OrganMeshModel::tube)
+    fail("has rings, which only a tube's wall takes", "remove rings, or set mesh = \"tube\"");
+  // Every region of a modelled organ carries a calibrated law: a region without one would be
+  // written with a placeholder solid, and no answer of the solver would mean anything.
+  for (const auto& region : regions)
+    if (!o.materials.count(region))
+      fail("region " + region + " has no material", "give it a calibrated law: materials = { " + region +
+                                                         " = \"<preset id>\" } (`organsmith materials` lists them)");
   for (const auto& [region, id] : o.materials) {
     try {
       (void)region_law(id);
@@ -278,6 +312,10 @@ MeshOrganSpec mesh_spec(const OrganInfo& organ, const std::map<std::string, doub
             : organ.mesh == OrganMeshModel::tube    ? OrganModel::tube
                                                     : OrganModel::solid;
   s.wall_mm = organ.wall_mm;
+  s.rings = organ.rings;
+  s.load_case = organ.load_case;
+  s.pressure_kPa = organ.pressure_kPa;
+  s.probe_diameter_mm = organ.probe_diameter_mm;
   if (const auto it = wall_mm.find(organ.name); it != wall_mm.end()) s.wall_mm = it->second;
   return s;
 }

@@ -32,6 +32,10 @@ struct OrganInfo {
   std::uint8_t label = 0;            ///< value in label maps
   OrganMeshModel mesh = OrganMeshModel::none;
   double wall_mm = 0.0;              ///< wall thickness for wall_body and tube, mm
+  TubeRings rings;                   ///< tube: cartilage rings and membrane (pitch 0 = one wall region)
+  std::string load_case;             ///< default load case: "indentation", "pressure" or "" (none)
+  double pressure_kPa = 0.0;         ///< lumen pressure of the pressure load case, kPa
+  double probe_diameter_mm = 5.0;    ///< indentation probe diameter, mm
   std::map<std::string, std::string> materials;  ///< tet region → material preset id (data/materials.toml)
   std::string haptic_surface;        ///< surface the tool touches (see surfaces()); empty = not touched
   std::string haptic_region;         ///< region whose calibrated law the tool feels

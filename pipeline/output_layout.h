@@ -52,6 +52,8 @@ struct OutputLayout {
     return simulation_dir() / (organ + "." + ext);
   }
   /// The solver's own files of an organ's run (input copy, log, .sta, .dat).
+  /// The indentation's force against depth (an organ whose load case is the probe).
+  std::filesystem::path indentation_plot(const std::string& organ) const { return simulation_dir() / (organ + "_indentation.png"); }
   std::filesystem::path simulation_work(const std::string& organ) const { return simulation_dir() / (organ + "_solver"); }
 
   std::filesystem::path snapshots_dir() const { return root / "snapshots"; }

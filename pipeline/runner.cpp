@@ -19,7 +19,9 @@
 #include "meshing/export.h"
 #include "meshing/mesh.h"
 #include "physics/haptics/contact.h"
+#include "physics/materials/models.h"
 #include "physics/materials/presets.h"
+#include "core/format.h"
 #include "pipeline/simulate.h"
 #include "pipeline/simulation_picture.h"
 #include "pipeline/output_dir.h"
@@ -224,8 +226,12 @@ class Runner {
       // the CT.
       const auto& bed = case_.stages.guide.dissection;
       const nlohmann::json bed_opts = {{"bed_from_ct", bed.bed_from_ct}, {"bed_distance_mm", bed.bed_distance_mm}};
+      // The probe's place and depth are simulate options written into the mesh stage's INP.
+      const nlohmann::json probe_opts = {{"probe_lps_mm", case_.stages.simulate.probe_lps_mm},
+                                         {"probe_depth_mm", case_.stages.simulate.probe_depth_mm}};
       execute({"mesh", fingerprint("mesh", mesh_opts.dump() + registry_digest() + materials_json().dump() +
-                                               bed_opts.dump() + outputs_digest("ingest") + outputs_digest("segment")),
+                                               bed_opts.dump() + probe_opts.dump() + outputs_digest("ingest") +
+                                               outputs_digest("segment")),
                [&](const fs::path& staging) { write_meshes(staging); }});
       execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
                [&](const fs::path& staging) {
@@ -290,9 +296,17 @@ class Runner {
     }
     for (const auto& spec : options.organs) {
       SolverScenario sc = default_scenario(spec);
-      if (const auto it = mo.pressure_kPa.find(spec.name); it != mo.pressure_kPa.end()) sc.pressure_kPa = it->second;
+      if (const auto it = mo.pressure_kPa.find(spec.name); it != mo.pressure_kPa.end()) {
+        // A pressure asked for: the pressure step (for the gallbladder instead of the probe).
+        MeshOrganSpec pressure_spec = spec;
+        pressure_spec.load_case = "pressure";
+        sc = default_scenario(pressure_spec);
+        sc.pressure_kPa = it->second;
+      }
+      sc.probe_depth_mm = case_.stages.simulate.probe_depth_mm;
       ex.scenarios[spec.name] = sc;
     }
+    if (const auto& p = case_.stages.simulate.probe_lps_mm; p.size() == 3) ex.boundaries.probe_lps_mm = Eigen::Vector3d(p[0], p[1], p[2]);
     // The gallbladder's liver bed (its fixed set) by the guide stage's rule: a liver label, else
     // the CT, else the liver's usual direction.
     if (const OrganInfo* gb = case_.registry.find("gallbladder"))
@@ -325,6 +339,7 @@ class Runner {
     so.threads = case_.stages.simulate.threads;
     so.timeout_s = case_.stages.simulate.timeout_s;
     if (const char* ccx = std::getenv("ORGANSMITH_CCX"); ccx && *ccx) so.solver = ccx;
+    for (const auto& [region, law] : region_materials(case_.registry)) so.calibrated_stretch_max[region] = law.stretch_max;
     int ran = 0;
     for (const auto& o : case_.organs) {
       const OrganInfo& info = case_.registry.at(o.name);
@@ -333,7 +348,7 @@ class Runner {
       if (!only.empty() && std::find(only.begin(), only.end(), o.name) == only.end()) {
         // Not asked for this time: its earlier results stay (carried into the new commit).
         for (const fs::path& f : {layout_.simulation(o.name, "json"), layout_.simulation(o.name, "vtu"),
-                                   layout_.simulation(o.name, "png")})
+                                   layout_.simulation(o.name, "png"), layout_.indentation_plot(o.name)})
           if (fs::exists(f)) {
             fs::create_directories(staged.simulation_dir());
             fs::copy_file(f, staged.simulation_dir() / f.filename());
@@ -368,10 +383,15 @@ class Runner {
           }
       }
       if (case_.stages.simulate.band) sim.result.band = simulate_band(o.name, work, so);
+      if (sim.result.indentation) thesis_indentation_curve(info, *sim.result.indentation);
       write_simulation_files(sim.input, sim.frd, sim.result, staged.simulation_dir());
       try {  // the picture is a review aid: without a display the numbers still stand
         draw_simulation(sim, staged.simulation(o.name, "png"), case_.stages.snapshot.width_px,
                         case_.stages.snapshot.height_px);
+        if (sim.result.indentation)
+          draw_indentation_plot(sim, sim.result.indentation->thesis_curve, sim.result.indentation->thesis_source,
+                                staged.indentation_plot(o.name), case_.stages.snapshot.width_px,
+                                case_.stages.snapshot.height_px);
       } catch (const DisplayError& e) {
         spdlog::warn("simulate: {}: no picture ({})", o.name, e.message());
       }
@@ -380,9 +400,39 @@ class Runner {
                    "{:.3g} Pa; reaction balance {:.2g} %",
                    o.name, r.increments, r.solver_seconds, r.max_displacement_mm, r.max_von_mises_Pa,
                    100 * r.balance_error);
+      if (r.indentation) {
+        const auto& ind = *r.indentation;
+        spdlog::info("simulate: {}: {:.3g} mm probe pressed to {:.3g} mm ({}): {:.3g} mN; {:.3g} mN/mm at 1 mm",
+                     o.name, ind.probe.diameter_mm, ind.range_depth_mm,
+                     ind.range_region.empty() ? "the step's depth" : ind.range_region + " at the top of its range",
+                     1e3 * ind.curve.back()[1], 1e3 * ind.stiffness_N_per_mm_at_1mm);
+      }
+      if (r.pressure_range)
+        spdlog::warn("simulate: {}: the pressure of {:.3g} kPa takes {} past its calibrated range from {:.3g} kPa on; "
+                     "above that the answer is the fitted solid's extrapolation",
+                     o.name, r.pressure_kPa, r.pressure_range->region, r.pressure_range->in_range_pressure_kPa);
       ++ran;
     }
     if (ran == 0) spdlog::warn("simulate: no organ with a load case (gallbladder or trachea) in this case");
+  }
+
+  /// The thesis' own reading of the indentation test (§5.1.5, Figure 5.1.6): the organ's law
+  /// (its body region's, thesis Table 5.1.2) as a uniaxial nominal stress at strain depth /
+  /// organ thickness, the mean of its two directions, times the probe's area.
+  static void thesis_indentation_curve(const OrganInfo& info, IndentationResult& ind) {
+    const auto it = info.materials.find(info.name + "_body");
+    if (it == info.materials.end() || !(ind.probe.thickness_mm > 0)) return;
+    const physics::RegionLaw law = region_law(it->second);
+    const auto model = physics::make_model(law.material.model, law.options);
+    const std::vector<double> p = physics::parameter_values(*model, law.material.parameters);
+    const double area_m2 = M_PI * 0.25 * ind.probe.diameter_mm * ind.probe.diameter_mm * 1e-6;
+    for (const auto& [depth, force] : ind.curve) {
+      const double l = 1.0 + depth / ind.probe.thickness_mm;
+      const double T = 0.5 * (model->respond_one({l, 1.0, physics::LoadCase::uniaxial_circumferential}, p) +
+                              model->respond_one({l, 1.0, physics::LoadCase::uniaxial_longitudinal}, p));
+      ind.thesis_curve.push_back({depth, std::isfinite(T) ? T * area_m2 : 0.0});
+    }
+    ind.thesis_source = law.id + " at strain depth / " + format_g(ind.probe.thickness_mm, 3) + " mm, times the probe's area";
   }
 
   /// The material band's variants of one organ (meshes/<organ>/band/), each run like the organ's

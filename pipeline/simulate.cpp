@@ -87,6 +87,24 @@ SolverInput read_solver_inp(const fs::path& path) {
     ++lineno;
     if (line.rfind("**", 0) == 0) {
       if (line.find("Coordinates RAS") != std::string::npos) r.ras = true;
+      if (line.rfind("** organsmith probe:", 0) == 0) {
+        // point x y z; direction x y z; diameter d; depth D; area A; thickness T (the file's frame)
+        std::string text = line.substr(20);
+        for (char& ch : text)
+          if (ch == ';') ch = ' ';
+        std::stringstream ss(text);
+        std::string word;
+        SolverProbe& p = r.probe;
+        while (ss >> word) {
+          if (word == "point") ss >> p.point_lps_mm.x() >> p.point_lps_mm.y() >> p.point_lps_mm.z();
+          else if (word == "direction") ss >> p.direction_lps.x() >> p.direction_lps.y() >> p.direction_lps.z();
+          else if (word == "diameter") ss >> p.diameter_mm;
+          else if (word == "depth") ss >> r.probe_depth_mm;
+          else if (word == "area") ss >> p.contact_area_mm2;
+          else if (word == "thickness") ss >> p.thickness_mm;
+        }
+        if (!ss.eof() && ss.fail()) throw bad("the probe comment is not 'point x y z; direction x y z; diameter d; depth D; …'");
+      }
       continue;
     }
     if (trim(line).empty()) continue;
@@ -149,7 +167,8 @@ SolverInput read_solver_inp(const fs::path& path) {
     } else if (block == "*MODEL CHANGE") {
       r.inactive_regions.push_back(cells[0]);
     } else if (block == "*BOUNDARY") {
-      if (cells[0].find("_inactive_only_nodes") == std::string::npos && r.fixed_node_set.empty()) r.fixed_node_set = cells[0];
+      if (cells.size() >= 4 && number(cells[3]) != 0.0) r.probe_node_set = cells[0];  // a prescribed motion
+      else if (cells[0].find("_inactive_only_nodes") == std::string::npos && r.fixed_node_set.empty()) r.fixed_node_set = cells[0];
     } else if (block == "*DSLOAD") {
       if (cells.size() != 3) throw bad("a *DSLOAD line needs surface, P, value");
       r.pressure_surface = cells[0];
@@ -157,6 +176,17 @@ SolverInput read_solver_inp(const fs::path& path) {
     }
   }
   if (m.nodes_lps_mm.empty() || m.elements.empty()) throw bad("no nodes or elements");
+  if (r.ras) {  // the probe comment is in the file's frame
+    r.probe.point_lps_mm = lps_to_ras(r.probe.point_lps_mm);
+    r.probe.direction_lps = lps_to_ras(r.probe.direction_lps);
+  }
+  if (r.indentation()) {
+    if (r.fixed_node_set.empty() || !(r.probe_depth_mm > 0))
+      throw bad("an indentation step needs a fixed *BOUNDARY and the probe comment with its depth");
+    if (!m.node_sets.count(r.fixed_node_set) || !m.node_sets.count(r.probe_node_set))
+      throw InputError(ExitCode::unsupported_input, "the load case names a set the INP does not define", path);
+    return r;
+  }
   if (r.fixed_node_set.empty() != r.pressure_surface.empty())
     throw bad("a load case needs both a *BOUNDARY and a *DSLOAD");
   if (!r.fixed_node_set.empty() && (!m.node_sets.count(r.fixed_node_set) || !m.surfaces.count(r.pressure_surface)))
@@ -270,7 +300,9 @@ void evaluate_simulation(const SolverInput& in, const FrdResult& frd, Simulation
   const double p_N_per_mm2 = in.pressure_MPa;
   std::map<std::int32_t, Eigen::Vector3d> nodal;
   double magnitude = 0;
-  for (const auto& f : m.surfaces.at(in.pressure_surface))
+  static const std::vector<SolverFace> kNone;
+  const auto& loaded = in.indentation() ? kNone : m.surfaces.at(in.pressure_surface);
+  for (const auto& f : loaded)
     for_each_face_point(m, f, deformed, [&](const std::vector<std::int32_t>& ids, const double* N, const Eigen::Vector3d&,
                                             const Eigen::Vector3d& nda) {
       magnitude += p_N_per_mm2 * nda.norm();
@@ -291,6 +323,7 @@ void evaluate_simulation(const SolverInput& in, const FrdResult& frd, Simulation
   r.load_magnitude_N = magnitude;
   const Eigen::Vector3d reaction(r.reaction_N[0], r.reaction_N[1], r.reaction_N[2]);
   r.balance_error = magnitude > 0 ? (reaction + applied_free).norm() / magnitude : 0.0;
+  if (r.indentation) r.balance_error = r.indentation->balance_error;
 
   r.max_displacement_mm = 0;
   for (const auto& u : frd.displacement_mm) r.max_displacement_mm = std::max(r.max_displacement_mm, std::hypot(u[0], u[1], u[2]));
@@ -306,27 +339,11 @@ void evaluate_simulation(const SolverInput& in, const FrdResult& frd, Simulation
     if (!active[v]) continue;
     r.max_von_mises_Pa = std::max(r.max_von_mises_Pa, von_mises(frd.stress_MPa[v]) * 1e6);
   }
-  // Principal stretches per active element from its corners: F = ∂x/∂X of the linear tet.
-  std::map<std::string, std::vector<double>> stretches;
-  for (std::size_t e = 0; e < m.elements.size(); ++e) {
-    const std::string& region = m.region_names.at(m.region_ids[e]);
-    if (std::find(in.inactive_regions.begin(), in.inactive_regions.end(), region) != in.inactive_regions.end()) continue;
-    const auto& el = m.elements[e];
-    Eigen::Matrix3d dX, dx;
-    for (int k = 0; k < 3; ++k) {
-      dX.col(k) = m.nodes_lps_mm[std::size_t(el[k + 1])] - m.nodes_lps_mm[std::size_t(el[0])];
-      dx.col(k) = deformed(el[k + 1]) - deformed(el[0]);
-    }
-    if (std::abs(dX.determinant()) < 1e-12) continue;
-    const Eigen::Matrix3d F = dx * dX.inverse();
-    const Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> eig(F.transpose() * F, Eigen::EigenvaluesOnly);
-    stretches[region].push_back(std::sqrt(std::max(0.0, eig.eigenvalues()(2))));
-  }
-  for (auto& [region, v] : stretches) {
-    std::sort(v.begin(), v.end());
-    auto& s = r.principal_stretch[region];
-    s.max = v.back();
-    s.p99 = v[std::size_t(0.99 * double(v.size() - 1))];
+  // Principal stretches per active element from its corners (the element's mean deformation).
+  for (const auto& [region, mx_p99] : region_stretches(in, frd.displacement_mm)) {
+    auto& st = r.principal_stretch[region];
+    st.max = mx_p99.first;
+    st.p99 = mx_p99.second;
   }
   // Lumen volume by the divergence theorem with the field (x_a, 0, 0), a an axis no cut face is
   // normal to, so that the open ends of a tube add nothing: V = ∫ x_a n_a da over the lumen
@@ -335,10 +352,12 @@ void evaluate_simulation(const SolverInput& in, const FrdResult& frd, Simulation
   for (const auto& [name, faces] : m.surfaces) {
     if (name.find("_left") != std::string::npos || name.find("_right") != std::string::npos) axis = axis == 0 ? 1 : axis;
   }
+  const std::string lumen = in.indentation() ? m.organ + "_lumen" : in.pressure_surface;
+  if (!m.surfaces.count(lumen)) return;
   auto volume = [&](bool def) {
     double V = 0;
     const auto undeformed = [&](std::int32_t v) { return m.nodes_lps_mm[std::size_t(v)]; };
-    for (const auto& f : m.surfaces.at(in.pressure_surface)) {
+    for (const auto& f : m.surfaces.at(lumen)) {
       auto add = [&](const std::vector<std::int32_t>&, const double*, const Eigen::Vector3d& x, const Eigen::Vector3d& nda) {
         V += x[axis] * nda[axis];
       };
@@ -382,6 +401,19 @@ nlohmann::json SimulationResult::to_json() const {
     }
   }
   j["principal_stretch"] = ps;
+  if (indentation) j["indentation"] = indentation->to_json();
+  if (!indentation && pressure_kPa > 0) {
+    j["pressure_kPa"] = pressure_kPa;
+    if (pressure_range) {
+      // The pressure step went past a region's range: the largest pressure that keeps every
+      // region's 99th-percentile stretch inside it.
+      j["in_range_pressure_kPa"] = pressure_range->in_range_pressure_kPa;
+      j["pressure_beyond_calibrated_range"] = true;
+      j["range_reached_by"] = pressure_range->region;
+    } else {
+      j["pressure_beyond_calibrated_range"] = false;
+    }
+  }
   if (!band.is_null()) j["band"] = band;
   return j;
 }
@@ -468,6 +500,24 @@ std::string solver_errors(const fs::path& log) {
   return trim(out);
 }
 
+/// ", largest principal stretch X (region, 99th percentile) against its range Y[, beyond it]" at
+/// the last converged increment, or "" when there is none.
+std::string stall_state(const SolverInput& in, const fs::path& frd, const std::map<std::string, double>& range) {
+  if (!fs::exists(frd)) return {};
+  auto incs = read_frd_increments(frd, in.model.nodes_lps_mm.size());
+  if (incs.empty()) return {};
+  std::string worst;
+  double worst_ratio = 0, p99 = 0, top = 0;
+  for (const auto& [region, mx] : region_stretches(in, incs.back().displacement_mm)) {
+    const auto it = range.find(region);
+    const double ratio = it != range.end() && it->second > 1 ? (mx.second - 1) / (it->second - 1) : 0;
+    if (worst.empty() || ratio > worst_ratio) worst = region, worst_ratio = ratio, p99 = mx.second, top = it != range.end() ? it->second : 0;
+  }
+  if (worst.empty()) return {};
+  return "; largest principal stretch (99th percentile) " + format_g(p99, 3) + " in " + worst +
+         (top > 1 ? " against its calibrated " + format_g(top, 3) + (p99 > top ? ", beyond it" : ", inside it") : std::string());
+}
+
 }  // namespace
 
 Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const SimulateOptions& o, Progress& progress) {
@@ -512,11 +562,19 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
     if (progress.cancelled() || timed_out) {
       child.signal(SIGTERM);
       child.wait();
-      if (timed_out)
+      if (timed_out) {
+        const std::string state = stall_state(sim.input, work_dir / (job + ".frd"), o.calibrated_stretch_max);
+        const double rate = partial.load_factor / std::max(seconds, 1e-9);
         throw SimulationError(ExitCode::solver_failed,
                               r.organ + ": the solver did not finish within " + format_g(o.timeout_s, 4) + " s (load " +
-                                  format_g(100 * partial.load_factor, 3) + " % reached)",
-                              work_dir, "coarsen the mesh ([stages.mesh] edge_mm) or raise the time limit");
+                                  format_g(100 * partial.load_factor, 3) + " % reached" + state + ")",
+                              work_dir,
+                              partial.load_factor > 0.05
+                                  ? "raise the time limit ([stages.simulate] timeout_s): at this rate the step needs about " +
+                                        format_g((1.0 - partial.load_factor) / rate + seconds, 2) + " s"
+                                  : "raise the time limit, or coarsen the solver mesh ([stages.mesh] edge_mm): the step "
+                                    "has barely started");
+      }
       throw Cancelled();
     }
     progress.report(partial.load_factor, what);
@@ -527,20 +585,57 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
   const std::string text = read_file(log).value_or("");
   const bool finished = exit_code == 0 && text.find("Job finished") != std::string::npos;
   r.converged = finished && r.load_factor >= 1.0 - 1e-9;
+  const std::size_t nodes = sim.input.model.nodes_lps_mm.size();
+  std::vector<SolverIncrement> incs;
+  if (fs::exists(work_dir / (job + ".frd"))) incs = read_frd_increments(work_dir / (job + ".frd"), nodes);
+  if (sim.input.ras)  // the solver worked in the file's RAS frame; figures are taken in LPS
+    for (auto& inc : incs)
+      for (auto& u : inc.displacement_mm) u[0] = -u[0], u[1] = -u[1];
+  if (sim.input.indentation()) {
+    r.indentation = evaluate_indentation(sim.input, incs, read_dat_series(work_dir / (job + ".dat"), sim.input.probe_node_set),
+                                         read_dat_series(work_dir / (job + ".dat"), sim.input.fixed_node_set),
+                                         o.calibrated_stretch_max);
+    // A step that stalls after the wall reached its range has given the whole answer: the curve
+    // ends at the range either way.
+    if (!r.converged && !r.indentation->range_region.empty() && r.increments > 0) {
+      r.solver_message = "the step stopped at " + format_g(100 * r.load_factor, 3) + " % of its depth, after " +
+                         r.indentation->range_region + " reached its calibrated range at " +
+                         format_g(r.indentation->range_depth_mm, 3) + " mm";
+      r.converged = true;
+    }
+  } else {
+    r.pressure_kPa = sim.input.pressure_MPa * 1e3;
+    const PressureRange pr = evaluate_pressure_range(sim.input, incs, o.calibrated_stretch_max);
+    if (!pr.region.empty()) r.pressure_range = pr;
+  }
   if (!r.converged) {
-    r.solver_message = solver_errors(log);
+    if (r.solver_message.empty()) r.solver_message = solver_errors(log);
+    const std::string state = stall_state(sim.input, work_dir / (job + ".frd"), o.calibrated_stretch_max);
+    const bool beyond = state.find("beyond") != std::string::npos;
+    const std::string load = sim.input.indentation() ? "depth ([stages.simulate] probe_depth_mm)" : "pressure ([stages.mesh] pressure_kPa)";
     throw SimulationError(ExitCode::solver_failed,
                           r.organ + ": CalculiX stopped at " + format_g(100 * r.load_factor, 3) + " % of the load after " +
                               std::to_string(r.increments) + " increments and " + std::to_string(r.cutbacks) +
-                              " cutbacks" + (r.solver_message.empty() ? "" : ": " + r.solver_message),
+                              " cutbacks" + state + (r.solver_message.empty() ? "" : ": " + r.solver_message),
                           work_dir / "solver.log",
-                          "lower the pressure ([stages.mesh] pressure_kPa) or coarsen the mesh; the log has the solver's account");
+                          beyond ? "lower the " + load + ": the tissue is past the range its law was calibrated over, where "
+                                   "the fitted solid stiffens without data behind it"
+                                 : "coarsen the solver mesh ([stages.mesh] edge_mm): the step stalled with every region "
+                                   "inside its calibrated range, which points at distorted elements; the log has the solver's account");
   }
-  sim.frd = read_frd(work_dir / (job + ".frd"), sim.input.model.nodes_lps_mm.size());
-  if (sim.input.ras)  // the solver worked in the file's RAS frame; figures are taken in LPS
+  if (incs.empty()) throw SimulationError(ExitCode::solver_failed, "the result file holds no displacement", work_dir / (job + ".frd"));
+  sim.frd = read_frd(work_dir / (job + ".frd"), nodes);
+  if (sim.input.ras)
     for (auto& u : sim.frd.displacement_mm) u[0] = -u[0], u[1] = -u[1];
+  if (sim.input.indentation() && !r.indentation->range_region.empty()) {
+    // The picture and the figures at the curve's end: the last increment within the range.
+    for (const auto& inc : incs)
+      if (inc.time * sim.input.probe_depth_mm <= r.indentation->range_depth_mm + 1e-9) sim.frd.displacement_mm = inc.displacement_mm;
+  }
   r.reaction_N = read_dat_totals(work_dir / (job + ".dat"), sim.input.fixed_node_set);
   evaluate_simulation(sim.input, sim.frd, r);
+  for (auto& [region, st] : r.principal_stretch)
+    if (const auto it = o.calibrated_stretch_max.find(region); it != o.calibrated_stretch_max.end()) st.calibrated_max = it->second;
   return sim;
 }
 

@@ -16,6 +16,7 @@
 
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -36,6 +37,12 @@ struct SolverInput {
   double pressure_MPa = 0.0;
   std::vector<std::string> inactive_regions;
   bool ras = false;               ///< coordinates in the file are RAS
+  /// Indentation (instead of a pressure): the probe's node set, where it touches, its direction
+  /// (LPS) and the depth it is pressed to at the end of the step.
+  std::string probe_node_set;
+  SolverProbe probe;
+  double probe_depth_mm = 0.0;
+  bool indentation() const { return !probe_node_set.empty(); }
 };
 /// Reads an INP that organsmith wrote. InputError naming the file and line on anything else.
 SolverInput read_solver_inp(const std::filesystem::path& inp);
@@ -58,7 +65,64 @@ struct SimulateOptions {
   std::string solver = "ccx";  ///< executable, looked up on PATH
   int threads = 0;             ///< OpenMP threads of the solver; 0 = every core
   double timeout_s = 0.0;      ///< 0 = none
+  /// Top of each region's calibrated stretch range (region name → stretch > 1). The indentation
+  /// curve ends where the first region's 99th-percentile principal stretch reaches it; a pressure
+  /// step reports the pressure at which it does. Regions not named are not checked.
+  std::map<std::string, double> calibrated_stretch_max;
 };
+
+/// One converged increment of a step: its time (the load fraction), the displacement of every
+/// node (mm, LPS) and the sum of RF over named node sets (N).
+struct SolverIncrement {
+  double time = 0.0;
+  std::vector<std::array<double, 3>> displacement_mm;
+};
+/// Every converged increment's displacement in a CalculiX .frd (the file's frame).
+std::vector<SolverIncrement> read_frd_increments(const std::filesystem::path& frd, std::size_t node_count);
+/// Sum of RF over `set` at every increment printed in a .dat (time → force, N).
+std::vector<std::pair<double, std::array<double, 3>>> read_dat_series(const std::filesystem::path& dat,
+                                                                      const std::string& set);
+
+/// Per region (active elements only): the largest and the 99th-percentile principal stretch of
+/// the elements under `displacement_mm` (from the corners: each element's mean deformation).
+std::map<std::string, std::pair<double, double>> region_stretches(const SolverInput& in,
+                                                                  const std::vector<std::array<double, 3>>& displacement_mm);
+
+/// The thesis' indentation test on the organ: force against depth, to the depth where the first
+/// region reaches the top of its calibrated range (or the step's depth when none does).
+struct IndentationResult {
+  SolverProbe probe;                      ///< point and direction in LPS
+  double step_depth_mm = 0.0;             ///< the depth the step presses to
+  std::vector<std::array<double, 2>> curve;  ///< [depth mm, force N], from 0 to the range limit
+  double range_depth_mm = 0.0;            ///< where the curve ends
+  std::string range_region;               ///< the region that reached its range first ("" = none did)
+  double range_stretch = 0.0;             ///< that region's range (its calibrated stretch_max)
+  double stiffness_N_per_mm_at_1mm = 0.0; ///< dF/dδ at 1 mm (NaN when the curve ends before 1 mm)
+  double fixed_reaction_N = 0.0;          ///< the fixed set's reaction along the probe at the deepest converged point
+  double probe_force_N = 0.0;             ///< the probe's force at that point
+  double balance_error = 0.0;             ///< |probe + fixed| / |probe| there
+  /// The thesis' reading of its own test (§5.1.5): the organ law's uniaxial nominal stress at
+  /// strain depth / organ thickness, times the probe's area ([depth mm, force N]; set by the caller).
+  std::vector<std::array<double, 2>> thesis_curve;
+  std::string thesis_source;
+  nlohmann::json to_json() const;
+};
+
+/// The pressure at which a pressure step's first region reaches its range (interpolated between
+/// increments), and which region; pressure 0 when none does.
+struct PressureRange {
+  double in_range_pressure_kPa = 0.0;
+  std::string region;
+};
+
+/// The indentation figures from a step's increments, the probe's and the fixed set's RF totals
+/// (read_dat_series) and each region's range.
+IndentationResult evaluate_indentation(const SolverInput& in, const std::vector<SolverIncrement>& increments,
+                                       const std::vector<std::pair<double, std::array<double, 3>>>& probe_rf,
+                                       const std::vector<std::pair<double, std::array<double, 3>>>& fixed_rf,
+                                       const std::map<std::string, double>& calibrated_stretch_max);
+PressureRange evaluate_pressure_range(const SolverInput& in, const std::vector<SolverIncrement>& increments,
+                                      const std::map<std::string, double>& calibrated_stretch_max);
 
 struct SimulationResult {
   std::string organ;
@@ -85,6 +149,11 @@ struct SimulationResult {
   std::map<std::string, RegionStretch> principal_stretch;
   /// The material band's runs (see band_summary), null when none were run.
   nlohmann::json band;
+  /// Indentation steps: the curve and its figures.
+  std::optional<IndentationResult> indentation;
+  /// Pressure steps: the step's pressure (kPa) and the largest within every region's range.
+  double pressure_kPa = 0.0;
+  std::optional<PressureRange> pressure_range;
   nlohmann::json to_json() const;
 };
 

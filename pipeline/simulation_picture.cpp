@@ -55,9 +55,15 @@ void draw_simulation(const Simulation& sim, const std::filesystem::path& png, in
     std::replace(n.begin(), n.end(), '_', ' ');
     return n;
   };
-  d.detail = format_g(sim.input.pressure_MPa * 1e3, 3) + " kPa in the " + bare(sim.input.pressure_surface) + ", " +
-             bare(sim.input.fixed_node_set) + " fixed  |  largest displacement " + format_g(r.max_displacement_mm, 3) +
-             " mm  |  " + std::to_string(r.increments) + " increments";
+  if (r.indentation)
+    d.detail = format_g(r.indentation->probe.diameter_mm, 3) + " mm probe pressed " + format_g(r.indentation->range_depth_mm, 3) +
+               " mm, " + format_g(1e3 * r.indentation->curve.back()[1], 3) + " mN, " + bare(sim.input.fixed_node_set) +
+               " fixed  |  largest displacement " + format_g(r.max_displacement_mm, 3) + " mm  |  " +
+               std::to_string(r.increments) + " increments";
+  else
+    d.detail = format_g(sim.input.pressure_MPa * 1e3, 3) + " kPa in the " + bare(sim.input.pressure_surface) + ", " +
+               bare(sim.input.fixed_node_set) + " fixed  |  largest displacement " + format_g(r.max_displacement_mm, 3) +
+               " mm  |  " + std::to_string(r.increments) + " increments";
   SnapshotScene scene;
   scene.deformations.push_back(std::move(d));
   SnapshotOptions so;
@@ -65,6 +71,41 @@ void draw_simulation(const Simulation& sim, const std::filesystem::path& png, in
   so.height_px = height_px;
   SnapshotRenderer renderer(so);
   renderer.render_to_png(scene, "simulation_" + sim.result.organ, png);
+}
+
+void draw_indentation_plot(const Simulation& sim, const std::vector<std::array<double, 2>>& reference,
+                           const std::string& reference_name, const std::filesystem::path& png, int width_px, int height_px) {
+  const IndentationResult& ind = *sim.result.indentation;
+  Plot plot;
+  plot.name = "indentation_" + sim.result.organ;
+  plot.title = sim.result.organ + ": force against depth under a " + format_g(ind.probe.diameter_mm, 3) + " mm probe";
+  plot.x_label = "depth, mm";
+  plot.y_label = "force, mN";
+  plot.note = "CalculiX on the patient's mesh; the curve ends where " +
+              (ind.range_region.empty() ? std::string("the step ends") : ind.range_region + " reaches its calibrated stretch");
+  PlotSeries fe;
+  fe.name = "finite elements (" + std::to_string(ind.curve.size() - 1) + " increments)";
+  for (const auto& [d, f] : ind.curve) fe.x.push_back(d), fe.y.push_back(1e3 * f);
+  plot.series.push_back(fe);
+  PlotSeries marks = fe;
+  marks.points = true;
+  marks.in_legend = false;
+  plot.series.push_back(marks);
+  if (!reference.empty()) {
+    PlotSeries ref;
+    ref.name = reference_name;
+    ref.colour = {0.8, 0.3, 0.1};
+    ref.dashed = true;
+    for (const auto& [d, f] : reference) ref.x.push_back(d), ref.y.push_back(1e3 * f);
+    plot.series.push_back(ref);
+  }
+  SnapshotScene scene;
+  scene.plots.push_back(std::move(plot));
+  SnapshotOptions so;
+  so.width_px = width_px;
+  so.height_px = height_px;
+  SnapshotRenderer renderer(so);
+  renderer.render_to_png(scene, "plot_indentation_" + sim.result.organ, png);
 }
 
 }  // namespace organsmith

@@ -39,6 +39,8 @@ class Visitor {
   /// A table of organ name → number (organ names are checked against the registry by the caller).
   virtual void per_organ(const char* key, std::map<std::string, double>& v, double lo, double hi, const char* unit,
                          const char* doc) = 0;
+  /// A point [x, y, z] (LPS mm), or [] for none.
+  virtual void point(const char* key, std::vector<double>& v, const char* doc) = 0;
 };
 
 void visit(Visitor& v, MeshStageOptions& o) {
@@ -53,7 +55,8 @@ void visit(Visitor& v, MeshStageOptions& o) {
            "(warn, quality.json)");
   v.boolean("linear_tets", o.linear_tets, "linear tetrahedra (C3D4/tet4) instead of quadratic (C3D10/tet10)");
   v.per_organ("pressure_kPa", o.pressure_kPa, 0.0, 100.0, "kPa",
-              "lumen pressure of the organ's load step, e.g. { trachea = 1.0 }; {} = gallbladder 1.5, trachea 2.0");
+              "a lumen pressure load step for the organs named, e.g. { trachea = 1.0 } (for the gallbladder instead of "
+              "its indentation); {} = each organ's registry load case (gallbladder: the 5 mm probe; trachea: 2 kPa)");
   v.number("max_fold_deg", o.max_fold_deg, 0.0, 180.0, "deg",
            "fold gate of an organ's uncut outer surface: largest angle between neighbouring triangles; 0 = off (default); 60 smooths a coarse "
            "scan's staircase away before a solver sees it");
@@ -67,6 +70,12 @@ void visit(Visitor& v, SimulateStageOptions& o) {
   v.integer("threads", o.threads, 0, 1024, "solver threads; 0 = every core");
   v.number("timeout_s", o.timeout_s, 0.0, 1.0e6, "s", "stop a solver run after this long; 0 = no limit");
   v.boolean("band", o.band, "also run the material band's variants ([stages.mesh] material_band) and report a band");
+  v.point("probe_lps_mm", o.probe_lps_mm,
+          "where the indentation probe touches the gallbladder, [x, y, z] LPS mm (snapped to its free surface); [] = the "
+          "centre of the surface opposite the liver bed");
+  v.number("probe_depth_mm", o.probe_depth_mm, 0.0, 100.0, "mm",
+           "depth the probe's step presses to; 0 = a quarter of the organ's thickness under it (the curve ends earlier "
+           "where a region reaches its calibrated range)");
 }
 
 void visit(Visitor& v, GuideStageOptions& o) {
@@ -182,6 +191,20 @@ class Parser final : public Visitor {
     }
   }
 
+  void point(const char* key, std::vector<double>& v, const char*) override {
+    const toml::node* n = take(key);
+    if (!n) return;
+    const toml::array* a = n->as_array();
+    if (!a || (a->size() != 3 && a->size() != 0)) fail(*n, key, "must be [x, y, z] (LPS mm) or []", "e.g. [12.5, -40.0, 101.0]");
+    std::vector<double> out;
+    for (const auto& item : *a) {
+      const auto x = item.value<double>();
+      if (!x || !std::isfinite(*x) || std::abs(*x) > 1e5) fail(item, key, "must hold three finite numbers (mm)", "");
+      out.push_back(*x);
+    }
+    v = out;
+  }
+
   /// After the visit: a key no field took is a typo or an option of another stage.
   void reject_unknown(const std::set<std::string>& also_allowed = {}) const {
     std::vector<std::string> valid = known_;
@@ -222,6 +245,7 @@ class JsonWriter final : public Visitor {
   void per_organ(const char* key, std::map<std::string, double>& v, double, double, const char*, const char*) override {
     j[key] = v.empty() ? nlohmann::json::object() : nlohmann::json(v);
   }
+  void point(const char* key, std::vector<double>& v, const char*) override { j[key] = v.empty() ? nlohmann::json::array() : nlohmann::json(v); }
 };
 
 class TomlWriter final : public Visitor {
@@ -251,6 +275,11 @@ class TomlWriter final : public Visitor {
     for (const auto& [organ, x] : v) items.push_back(organ + " = " + format_g(x, 6));
     line(key, "{ " + join(items) + (items.empty() ? "}" : " }"),
          std::string(doc) + " (" + format_g(lo, 6) + "–" + format_g(hi, 6) + " " + unit + ")");
+  }
+  void point(const char* key, std::vector<double>& v, const char* doc) override {
+    std::vector<std::string> items;
+    for (double x : v) items.push_back(format_g(x, 6));
+    line(key, "[" + join(items) + "]", doc);
   }
 
  private:

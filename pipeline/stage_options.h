@@ -29,8 +29,8 @@ struct MeshStageOptions {
   std::string quality_gate = "enforce";
   /// Linear tetrahedra (C3D4 / tet4) in the volume files instead of quadratic ones (default false).
   bool linear_tets = false;
-  /// Lumen pressure of an organ's load step in the solver files, kPa, e.g. { trachea = 1.0 }; an
-  /// organ not named keeps its default (gallbladder 1.5, trachea 2.0).
+  /// A lumen pressure load step for the organs named, kPa, e.g. { trachea = 1.0 }; for the
+  /// gallbladder it replaces the indentation. An organ not named keeps its registry load case.
   std::map<std::string, double> pressure_kPa;
   /// Also write each organ's INP with the P5, P50 and P95 variants of its regions' materials
   /// (meshes/<organ>/band/<organ>.p05.inp, …; physics/materials/material_band.h), and the band in
@@ -52,6 +52,11 @@ struct SimulateStageOptions {
   /// Also run the material band's variants ([stages.mesh] material_band) and report the organ's
   /// largest displacement and lumen volume change as a band (default false).
   bool band = false;
+  /// Where the gallbladder's indentation probe touches, LPS mm ({} = the centre of the free
+  /// surface opposite the liver bed). Written into the solver files by the mesh stage.
+  std::vector<double> probe_lps_mm;
+  /// Depth the probe's step presses to, mm; 0 = a quarter of the organ's thickness under it.
+  double probe_depth_mm = 0.0;
 };
 
 /// [stages.snapshot]: the review pictures.
