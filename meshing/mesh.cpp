@@ -481,10 +481,11 @@ OrganMesh mesh_one(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOpti
   if (o.tetrahedra) {
     Timeline::Scope step{tl, "tetrahedra"};
     Mesh3Criteria c;
-    c.facet_size_mm = o.edge_mm;
-    c.facet_distance_mm = 0.075 * o.edge_mm;
+    const double tet_edge_mm = o.tet_edge_mm > 0 ? o.tet_edge_mm : o.edge_mm;
+    c.facet_size_mm = tet_edge_mm;
+    c.facet_distance_mm = 0.075 * tet_edge_mm;
     c.facet_angle_deg = 25.0;
-    c.cell_size_mm = o.tet_size_mm > 0 ? o.tet_size_mm : o.edge_mm;
+    c.cell_size_mm = tet_edge_mm;
     c.cell_radius_edge = o.max_radius_edge;
     // Sliver perturbation to 8°, exudation to 12°, then organsmith's repair (slides on the
     // surfaces, vertex moves, 2-3/3-2 flips, edge splits, peeling; tet_improve.cpp), which takes
@@ -639,6 +640,8 @@ OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Prog
     throw InputError(ExitCode::mesh_input, "the label map is empty (no voxels)", {}, "pass a segmented label map");
   if (options.edge_mm <= 0 || !std::isfinite(options.edge_mm))
     throw UsageError("the target edge length must be positive (got " + fmt(options.edge_mm) + " mm)");
+  if (options.tet_edge_mm < 0 || !std::isfinite(options.tet_edge_mm))
+    throw UsageError("the tetrahedron edge must be positive, or 0 for the surface edge (got " + fmt(options.tet_edge_mm) + " mm)");
   if (options.organs.empty())
     throw UsageError("no organ to mesh", "name the organs (label, mesh model, wall) from the organ registry");
   OrganMeshes result;
@@ -678,6 +681,11 @@ OrganMeshes mesh_organs(const LabelMap& labels, const MeshOptions& options, Prog
                                fmt(largest) + " mm across, voxels of " + fmt(voxel) + " mm)",
                            "choose an edge length from " + fmt(0.1 * voxel) + " to " + fmt(0.25 * largest) +
                                " mm (--edge-mm, [stages.mesh] edge_mm)");
+    if (options.tet_edge_mm > 0 && (options.tet_edge_mm < 0.1 * voxel || options.tet_edge_mm > 0.25 * largest))
+      throw MeshInputError(spec.name + ": a tetrahedron edge of " + fmt(options.tet_edge_mm) + " mm does not fit the organ (" +
+                               fmt(largest) + " mm across, voxels of " + fmt(voxel) + " mm)",
+                           "choose a tetrahedron edge from " + fmt(0.1 * voxel) + " to " + fmt(0.25 * largest) +
+                               " mm ([stages.mesh] tet_edge_mm, --tet-edge-mm)");
     // Where the organ is nowhere thicker than twice its wall the wall is meshed alone (a warning
     // says so), so the wall is only refused when it could not fit across the organ at all.
     if (spec.model != OrganModel::solid && !(spec.wall_mm > 0 && spec.wall_mm < 0.5 * largest))

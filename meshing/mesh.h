@@ -58,7 +58,10 @@ struct MeshOptions {
   double max_smoothing_sigma_mm = 1.5;  ///< cap on σ along thick-slice axes (mm)
   int remesh_iterations = 6;         ///< isotropic remeshing iterations
   bool tetrahedra = true;            ///< also build tetrahedral meshes
-  double tet_size_mm = 0.0;          ///< tetrahedron circumradius bound (mm); 0 = 1.5 × edge_mm
+  /// Edge of the tetrahedral meshes (mm; 0 = edge_mm): their boundary facets and cells. The
+  /// surfaces keep edge_mm; the volume files are what solvers and the real-time model factor, and
+  /// their cost grows with the node count (see the simulate stage's figures in the README).
+  double tet_edge_mm = 0.0;
   double min_dihedral_deg = 10.0;    ///< quality gate: every tet's smallest dihedral angle (deg)
   double max_radius_edge = 2.0;      ///< quality gate: every tet's circumradius / shortest edge
   /// Quality gate of an organ's own closed boundary without cut faces (not tubes, not inner

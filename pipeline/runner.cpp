@@ -264,6 +264,7 @@ class Runner {
     MeshOptions options;
     for (const auto& o : case_.organs) options.organs.push_back(mesh_spec(case_.registry.at(o.name), mo.wall_mm));
     options.edge_mm = mo.edge_mm;
+    options.tet_edge_mm = mo.tet_edge_mm;
     options.tetrahedra = mo.tetrahedra;
     options.max_fold_deg = mo.max_fold_deg;
     // "enforce" (the default): a figure still failing after the remedies stops the run (exit 61);

@@ -572,7 +572,7 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
                               partial.load_factor > 0.05
                                   ? "raise the time limit ([stages.simulate] timeout_s): at this rate the step needs about " +
                                         format_g((1.0 - partial.load_factor) / rate + seconds, 2) + " s"
-                                  : "raise the time limit, or coarsen the solver mesh ([stages.mesh] edge_mm): the step "
+                                  : "raise the time limit, or coarsen the solver mesh ([stages.mesh] tet_edge_mm): the step "
                                     "has barely started");
       }
       throw Cancelled();
@@ -620,7 +620,7 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
                           work_dir / "solver.log",
                           beyond ? "lower the " + load + ": the tissue is past the range its law was calibrated over, where "
                                    "the fitted solid stiffens without data behind it"
-                                 : "coarsen the solver mesh ([stages.mesh] edge_mm): the step stalled with every region "
+                                 : "coarsen the solver mesh ([stages.mesh] tet_edge_mm): the step stalled with every region "
                                    "inside its calibrated range, which points at distorted elements; the log has the solver's account");
   }
   if (incs.empty()) throw SimulationError(ExitCode::solver_failed, "the result file holds no displacement", work_dir / (job + ".frd"));
