@@ -1,6 +1,7 @@
 #pragma once
 // A constitutive model with its parameter values, units and provenance.
 
+#include <array>
 #include <optional>
 #include <string>
 #include <vector>
@@ -55,6 +56,12 @@ struct SolverMaterial {
   /// The law itself in FEBio's Fung orthotropic form, for membrane Fung laws (fung-wall); FEB
   /// files use it with per-element material axes, other formats the Ogden fit.
   std::optional<FebioFungOrthotropic> febio_fung;
+  /// The law itself where it is a Mooney–Rivlin solid, {C10, C01} in Pa: INP files write it as
+  /// *HYPERELASTIC, MOONEY-RIVLIN (exact, and an invariant form whose tangent CalculiX evaluates
+  /// well at small strain; its Ogden form with equal exponents stalls Newton there: the phantom's
+  /// trachea at 10 Pa made 17 iterations without converging, the same model in MOONEY-RIVLIN ran
+  /// to 2 kPa in 34). Other formats use the Ogden fit, which reproduces the law exactly too.
+  std::optional<std::array<double, 2>> mooney_rivlin_Pa;
 };
 
 }  // namespace organsmith

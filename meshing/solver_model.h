@@ -51,7 +51,7 @@ struct SolverScenario {
 };
 
 /// The automatic indentation depth as a fraction of the organ's thickness along the probe.
-inline constexpr double kProbeDepthFraction = 0.25;
+inline constexpr double kProbeDepthFraction = 0.2;
 
 /// The indentation probe on a model: where it touches, along which direction it presses, and
 /// the faces it holds (the surface <organ>_probe and node set <organ>_probe_nodes). The probe is

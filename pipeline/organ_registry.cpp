@@ -356,7 +356,7 @@ nlohmann::json fit_json(const physics::SolverFit& f) {
   nlohmann::json curves = nlohmann::json::array();
   for (const auto& c : f.curves)
     curves.push_back({{"path", c.name}, {"fitted", c.fitted}, {"max_relative_error", c.max_relative_error}});
-  return {{"form", "ogden"},
+  nlohmann::json j = {{"form", "ogden"},
           {"convention", "W = sum 2 mu_i/alpha_i^2 (l1^alpha_i + l2^alpha_i + l3^alpha_i - 3) + (J - 1)^2 / D1, D1 = 2/K"},
           {"mu_Pa", m.ogden_mu_Pa},
           {"alpha", m.ogden_alpha},
@@ -367,6 +367,9 @@ nlohmann::json fit_json(const physics::SolverFit& f) {
           {"max_relative_error", m.max_relative_error},
           {"paths", curves},
           {"min_tangent_Pa", f.min_tangent_Pa}};
+  // Mooney-Rivlin laws go into INP files as themselves (core/material.h says why).
+  if (m.mooney_rivlin_Pa) j["inp"] = {{"form", "mooney-rivlin"}, {"C10_Pa", (*m.mooney_rivlin_Pa)[0]}, {"C01_Pa", (*m.mooney_rivlin_Pa)[1]}};
+  return j;
 }
 
 /// The first (uniaxial or direction-mean) path of a fit's curves as [[stretch, Pa], …] from (1, 0).

@@ -46,7 +46,7 @@ class Visitor {
 void visit(Visitor& v, MeshStageOptions& o) {
   v.number("edge_mm", o.edge_mm, 0.3, 10.0, "mm", "target surface edge length");
   v.number("tet_edge_mm", o.tet_edge_mm, 0.0, 20.0, "mm",
-           "edge of the tetrahedral meshes (solver files, real-time model); 0 = edge_mm; default 3 (solver runs in a minute)");
+           "edge of the tetrahedral meshes (solver files, real-time model); 0 = edge_mm; default 4.5 (solver models of ~10 000 nodes)");
   v.per_organ("wall_mm", o.wall_mm, 0.5, 8.0, "mm", "wall thickness per organ, e.g. { gallbladder = 3.0 }; "
                                                     "{} = the organ registry's");
   v.boolean("tetrahedra", o.tetrahedra, "also build tetrahedral meshes");

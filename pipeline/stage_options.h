@@ -18,10 +18,11 @@ namespace organsmith {
 struct MeshStageOptions {
   double edge_mm = 1.5;               ///< target surface edge length, mm (default 1.5)
   /// Edge of the tetrahedral meshes (the solver files and the real-time model), mm; the surfaces
-  /// keep edge_mm. 0 = edge_mm. Default 3: the default load cases converge in CalculiX within a
-  /// minute per organ on 2 cores, and the indentation force moves by less than 5 % against a
-  /// 0.7× edge (README "Simulation").
-  double tet_edge_mm = 3.0;
+  /// keep edge_mm. 0 = edge_mm. Default 4.5: the phantom's solver models have 10 000 (gallbladder)
+  /// and 16 000 (trachea) C3D10 nodes, where CalculiX takes ~0.7–1.2 s per Newton iteration on
+  /// 2 cores; at 1.5 mm they had 85 000–90 000 and no run ended within ten minutes (README
+  /// "Simulation" has the figures).
+  double tet_edge_mm = 4.5;
   /// Wall thickness per organ, mm, e.g. { gallbladder = 3.0 }; an organ not named keeps the
   /// organ registry's wall_mm (default: none named).
   std::map<std::string, double> wall_mm;

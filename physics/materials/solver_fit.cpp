@@ -145,6 +145,18 @@ SolverFit fit_solver_curves(const RegionLaw& law, std::vector<LawCurve> curves, 
   // Small-strain shear modulus of the law from its first uniaxial sample: T ≈ 3 μ0 (λ − 1).
   const LawCurve& first = out.curves.front();
   const double mu0 = std::max(first.nominal_stress_Pa[0] / (3.0 * (first.stretch[0] - 1.0)), 1e-6);
+  // The small-strain modulus itself is fitted, at full relative weight: the 1 % floor above lets
+  // the fit ignore stresses below 1 % of the largest, and steep laws then came out with an initial
+  // shear modulus 50× below the law's (fung-organ: Σ μi = 2.4 Pa against μ0 ≈ 120 Pa), which
+  // a solver's first Newton step takes as the tangent and overshoots by orders of magnitude
+  // (CalculiX, patient gallbladder under the probe: 787 mm corrections at 0.14 mm of depth).
+  {
+    const double l = 1.0 + 0.1 * (first.stretch[0] - 1.0);
+    data.points.push_back({l, 1.0, LoadCase::uniaxial_circumferential});
+    data.measured.push_back(3.0 * mu0 * (l - 1.0));
+    data.specimen.push_back("small strain");
+    data.weight.push_back(1.0 / data.measured.back());
+  }
   std::vector<double> lo, hi;
   for (int k = 0; k < kTerms; ++k) {
     lo.insert(lo.end(), {0.0, 0.5});
@@ -195,9 +207,17 @@ SolverFit fit_solver_curves(const RegionLaw& law, std::vector<LawCurve> curves, 
     const double l = 1.0 + (law.stretch_max - 1.0) * i / 100.0, h = 1e-6;
     mu_t = std::max(mu_t, (ogden_nominal_Pa(m, l + h, false) - ogden_nominal_Pa(m, l - h, false)) / (6 * h));
   }
-  m.bulk_modulus_Pa = o.bulk_to_shear * mu_t;
-  m.bulk_source = "K = " + format_g(o.bulk_to_shear) + " × the largest tangent shear modulus over the range (" +
-                  format_g(mu_t, 4) + " Pa; " + format_g(m.bulk_modulus_Pa / initial_shear_Pa(m), 4) + " μ0)";
+  // Laws that hardly stiffen (neo-Hookean tissue over 10 %) keep at least K = 2.5 × that × μ0
+  // (ν ≈ 0.496 at bulk_to_shear 50).
+  if (mu_t < 2.5 * initial_shear_Pa(m)) {
+    m.bulk_modulus_Pa = o.bulk_to_shear * 2.5 * initial_shear_Pa(m);
+    m.bulk_source = "K = " + format_g(2.5 * o.bulk_to_shear) + " μ0 (the law stiffens less than 2.5-fold over its range: largest tangent shear modulus " +
+                    format_g(mu_t, 4) + " Pa)";
+  } else {
+    m.bulk_modulus_Pa = o.bulk_to_shear * mu_t;
+    m.bulk_source = "K = " + format_g(o.bulk_to_shear) + " × the largest tangent shear modulus over the range (" +
+                    format_g(mu_t, 4) + " Pa; " + format_g(m.bulk_modulus_Pa / initial_shear_Pa(m), 4) + " μ0)";
+  }
   if (law.material.model == "fung-organ") {
     // The thesis' volumetric term (5.1.13) is its incompressibility penalty; its curvature at J = 1
     // is K (1 + t)/(2 t²), far below the stiffened shear modulus, so it is recorded, not used.
@@ -221,6 +241,10 @@ SolverFit fit_solver_curves(const RegionLaw& law, std::vector<LawCurve> curves, 
     throw InputError(ExitCode::calibration_data,
                      "material '" + law.id + "': the fitted Ogden solid is not stable over [1, " + format_g(law.stretch_max) + "]",
                      {}, "check the law's parameters; a stable law gives a stable fit");
+  if (law.material.model == "mooney-rivlin") {
+    const auto c1 = law.material.parameter("C1"), c2 = law.material.parameter("C2");
+    if (c1) m.mooney_rivlin_Pa = std::array<double, 2>{*c1, c2.value_or(0.0)};
+  }
   if (law.material.model == "fung-wall") {
     const auto& p = law.material;
     const auto c = p.parameter("c"), a1 = p.parameter("a1"), a2 = p.parameter("a2"), a4 = p.parameter("a4");

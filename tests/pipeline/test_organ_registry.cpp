@@ -67,8 +67,11 @@ TEST(OrganRegistry, MistakesNameTheOrganAndKey) {
   EXPECT_TRUE(has(e, "liver_wall") && has(e, "regions: liver")) << e;
   e = registry_error("[liver]\nmesh = \"solid\"\nmaterials = { liver = \"no-such/preset\" }\n");
   EXPECT_TRUE(has(e, "no-such/preset")) << e;
-  e = registry_error("[spleen]\nlabel = 1\nmesh = \"solid\"\n");
+  e = registry_error("[spleen]\nlabel = 1\nmesh = \"solid\"\nmaterials = { spleen = \"fung-organ/table-5.1.2/mean\" }\n");
   EXPECT_TRUE(has(e, "label 1 is used by two organs")) << e;
+  // A meshed region without a calibrated law would be exported with a placeholder: refused.
+  e = registry_error("[spleen]\nlabel = 9\nmesh = \"solid\"\n");
+  EXPECT_TRUE(has(e, "[spleen] region spleen has no material") && has(e, "organsmith materials")) << e;
   e = registry_error("[spleen]\nlabel = 9\nmesh = \"tube\"\n");
   EXPECT_TRUE(has(e, "needs wall_mm")) << e;
   e = registry_error("[spleen]\nlabel = 9\nmesh = \"cube\"\n");
