@@ -54,10 +54,9 @@ Timing summarize(std::vector<double> v) {
 /// The law of a region as the organ registry assigns it (data/organs.toml).
 StressTable table_for(const char* region) {
   const MaterialLibrary lib = builtin_material_library();
-  const std::string id = std::string(region) == "trachea_wall" ? "trachea-wall/stand-in-table-5.1.1/mean"
-                                                               : "fung-organ/table-5.1.2/mean";
-  const MaterialPreset& p = lib.find(id);
-  return StressTable::from_material(p.material, model_options_for(p), 0.6);
+  const bool trachea = std::string(region) == "trachea_wall";
+  const MaterialPreset& p = lib.find(trachea ? "trachea-cartilage/safshekan-2016/mean" : "fung-organ/table-5.1.2/mean");
+  return StressTable::from_material(p.material, model_options_for(p), trachea ? 0.1 : 0.6);
 }
 
 /// Times single force ticks at tool positions within ±6 mm of the surfaces (where contact

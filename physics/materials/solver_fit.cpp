@@ -145,18 +145,6 @@ SolverFit fit_solver_curves(const RegionLaw& law, std::vector<LawCurve> curves, 
   // Small-strain shear modulus of the law from its first uniaxial sample: T ≈ 3 μ0 (λ − 1).
   const LawCurve& first = out.curves.front();
   const double mu0 = std::max(first.nominal_stress_Pa[0] / (3.0 * (first.stretch[0] - 1.0)), 1e-6);
-  // The small-strain modulus itself is fitted, at full relative weight: the 1 % floor above lets
-  // the fit ignore stresses below 1 % of the largest, and steep laws then came out with an initial
-  // shear modulus 50× below the law's (fung-organ: Σ μi = 2.4 Pa against μ0 ≈ 120 Pa), which
-  // a solver's first Newton step takes as the tangent and overshoots by orders of magnitude
-  // (CalculiX, patient gallbladder under the probe: 787 mm corrections at 0.14 mm of depth).
-  {
-    const double l = 1.0 + 0.1 * (first.stretch[0] - 1.0);
-    data.points.push_back({l, 1.0, LoadCase::uniaxial_circumferential});
-    data.measured.push_back(3.0 * mu0 * (l - 1.0));
-    data.specimen.push_back("small strain");
-    data.weight.push_back(1.0 / data.measured.back());
-  }
   std::vector<double> lo, hi;
   for (int k = 0; k < kTerms; ++k) {
     lo.insert(lo.end(), {0.0, 0.5});
@@ -164,19 +152,45 @@ SolverFit fit_solver_curves(const RegionLaw& law, std::vector<LawCurve> curves, 
   }
   // Deterministic starts: exponent triples from mild to steep, μ shared so that Σ μp αp/2 = μ0.
   const double alpha_starts[][kTerms] = {{2, 8, 20}, {1, 5, 15}, {3, 12, 28}, {2, 16, 29}, {1.5, 6, 25}, {4, 10, 30}};
-  double best_err = std::numeric_limits<double>::infinity();
-  std::vector<double> best;
-  for (const auto& a : alpha_starts) {
-    std::vector<double> start;
-    for (int k = 0; k < kTerms; ++k) start.insert(start.end(), {2.0 * mu0 / (kTerms * a[k]), a[k]});
-    const FitResult r = least_squares(*ogden, data, start, lo, hi, LmOptions{400, 1e-12});
-    double err = 0;
-    for (std::size_t i = 0; i < data.measured.size(); ++i)
-      err = std::max(err, std::abs(r.predicted[i] - data.measured[i]) / data.measured[i]);
-    if (std::isfinite(err) && err < best_err) {
-      best_err = err;
-      best = r.parameters;
+  const auto fit = [&](const CalibrationData& d) {
+    double best_err = std::numeric_limits<double>::infinity();
+    std::vector<double> best;
+    for (const auto& a : alpha_starts) {
+      std::vector<double> start;
+      for (int k = 0; k < kTerms; ++k) start.insert(start.end(), {2.0 * mu0 / (kTerms * a[k]), a[k]});
+      const FitResult r = least_squares(*ogden, d, start, lo, hi, LmOptions{400, 1e-12});
+      double err = 0;
+      for (std::size_t i = 0; i < d.measured.size(); ++i) err = std::max(err, std::abs(r.predicted[i] - d.measured[i]) / d.measured[i]);
+      if (std::isfinite(err) && err < best_err) {
+        best_err = err;
+        best = r.parameters;
+      }
     }
+    return best;
+  };
+  std::vector<double> best = fit(data);
+  // The small-strain modulus. The 1 % floor above lets the fit ignore stresses below 1 % of the
+  // largest, and steep laws came out with an initial shear modulus 50× below the law's
+  // (fung-organ: Σ μi = 2.4 Pa against μ0 ≈ 120 Pa), which a solver's first Newton step takes
+  // as the tangent and overshoots by orders of magnitude (CalculiX, a patient's gallbladder
+  // under the probe: 787 mm corrections at 0.14 mm of depth). Where the fit's Σ μi is below half
+  // the law's, the law's tangent at λ = 1 joins the data at full relative weight and the fit is
+  // redone. The tangent comes from the first two samples, T ≈ a ε + b ε² (a stiffening law's
+  // secant over the first sample overstates it), or the secant where that gives nothing sensible.
+  double slope = first.nominal_stress_Pa[0] / (first.stretch[0] - 1.0);
+  if (first.stretch.size() > 1) {
+    const double e1 = first.stretch[0] - 1.0, e2 = first.stretch[1] - 1.0;
+    const double T1 = first.nominal_stress_Pa[0], T2 = first.nominal_stress_Pa[1];
+    const double a = (T1 * e2 * e2 - T2 * e1 * e1) / (e1 * e2 * e2 - e2 * e1 * e1);
+    if (a > 0 && a <= slope) slope = a;
+  }
+  if (!best.empty() && initial_shear_Pa(to_solver(best)) < 0.5 * slope / 3.0) {
+    const double l = 1.0 + 0.1 * (first.stretch[0] - 1.0);
+    data.points.push_back({l, 1.0, LoadCase::uniaxial_circumferential});
+    data.measured.push_back(slope * (l - 1.0));
+    data.specimen.push_back("small strain");
+    data.weight.push_back(1.0 / data.measured.back());
+    if (auto anchored = fit(data); !anchored.empty()) best = std::move(anchored);
   }
   if (best.empty())
     throw InputError(ExitCode::calibration_data, "material '" + law.id + "': no Ogden solid fits its response", {});
@@ -254,7 +268,7 @@ SolverFit fit_solver_curves(const RegionLaw& law, std::vector<LawCurve> curves, 
   }
   std::ostringstream note;
   note << "Ogden N=3 fitted to " << law.material.model << " (" << law.id << ") over stretch [1, " << format_g(law.stretch_max)
-       << "] (" << m.curves << "); largest relative stress error " << format_g(std::round(best_err * 1e4) / 100) << " %";
+       << "] (" << m.curves << "); largest relative stress error " << format_g(std::round(m.max_relative_error * 1e4) / 100) << " %";
   m.note = note.str();
   return out;
 }

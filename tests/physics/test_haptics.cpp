@@ -133,7 +133,7 @@ SurfaceMesh tube_wall(double ri, double ro, double z0, double z1, int around = 9
 
 StressTable wall_table() {
   const MaterialLibrary lib = builtin_material_library();
-  const MaterialPreset& p = lib.find("trachea-wall/stand-in-table-5.1.1/mean")  /* the trachea wall's preset (data/organs.toml) */;
+  const MaterialPreset& p = lib.find("fung-wall/table-5.1.1/mean")  /* a steep law: the gallbladder wall's (data/organs.toml) */;
   return StressTable::from_material(p.material, model_options_for(p), 0.6);
 }
 
@@ -258,7 +258,7 @@ TEST(HapticsContact, ZeroOutsideMonotoneAndMatchesTheLaw) {
   const ContactModel contact(SurfaceIndex({box(lo, hi, 8)}), {table}, o);
   // The law itself, evaluated directly (not through the table).
   const MaterialLibrary lib = builtin_material_library();
-  const MaterialPreset& preset = lib.find("trachea-wall/stand-in-table-5.1.1/mean")  /* the trachea wall's preset (data/organs.toml) */;
+  const MaterialPreset& preset = lib.find("fung-wall/table-5.1.1/mean")  /* a steep law: the gallbladder wall's (data/organs.toml) */;
   const auto model = make_model(preset.material.model, model_options_for(preset));
   const auto p = parameter_values(*model, preset.material.parameters);
   double prev = -1.0;
