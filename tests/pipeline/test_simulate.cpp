@@ -155,7 +155,7 @@ TEST(Simulate, OrganLoadCasesConvergeAndBalanceInCalculix) {
     // The gallbladder only: the trachea's load case (both cut ends fixed) is the real 8 mm scan's
     // test below; on the phantom it added 137 s of solver time and nothing this test checks.
     c << "[case]\ninput = \"phantom\"\n[[organ]]\nname = \"gallbladder\"\n"
-         "[stages.mesh]\nedge_mm = 4.0\npressure_kPa = { gallbladder = 0.1 }\n"
+         "[stages.mesh]\nedge_mm = 4.0\ntet_edge_mm = 0\npressure_kPa = { gallbladder = 0.1 }\n"
          "[stages.simulate]\nenabled = true\n";
   }
   const auto r = run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out) + " --until simulate");
@@ -190,7 +190,7 @@ TEST(Simulate, RealGallbladderOnAThreeMillimetreScanConverges) {
   const fs::path data = organsmith::testing::real_data_dir() / "abdomen-ct-3mm";
   organsmith::testing::ScratchDir tmp("simulate-real-gb");
   const fs::path out = run_real_case(tmp.path(), data / "ct.nii.gz", "gallbladder", data / "gallbladder-reference.nii.gz",
-                                     "edge_mm = 3.0\npressure_kPa = { gallbladder = 0.1 }\nformats = [\"inp\", \"vtp\"]\n"
+                                     "edge_mm = 3.0\ntet_edge_mm = 0\npressure_kPa = { gallbladder = 0.1 }\nformats = [\"inp\", \"vtp\"]\n"
                                      "max_fold_deg = 60\n");
   if (::testing::Test::HasFailure()) return;
   expect_load_case_answered(out, "gallbladder", 100.0);
