@@ -480,6 +480,7 @@ std::array<double, 3> read_dat_totals(const fs::path& dat, const std::string& se
     if (line.find("total force") == std::string::npos || upper(line).find(want) == std::string::npos) continue;
     while (std::getline(in, line) && trim(line).empty()) {
     }
+    if (in.eof()) break;  // a line the solver was still writing when it was stopped
     std::stringstream ss(line);
     ss >> out[0] >> out[1] >> out[2];
   }
@@ -550,6 +551,11 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
   ChildProcess child(spec);
   int exit_code = -1;
   const std::string what = "simulate " + r.organ + " (CalculiX)";
+  // An indentation step is stopped where its curve ends: once a region's 99th-percentile stretch
+  // has passed the top of its calibrated range, the rest of the depth is the fitted solid's
+  // extrapolation and costs the most iterations.
+  int increments_checked = 0;
+  double stopped_at_range = -1.0;
   for (;;) {
     if (auto code = child.poll()) {
       exit_code = *code;
@@ -558,6 +564,16 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     SimulationResult partial;
     read_sta(work_dir / (job + ".sta"), partial);
+    if (sim.input.indentation() && partial.increments > increments_checked) {
+      increments_checked = partial.increments;
+      stopped_at_range = indentation_range_time(sim.input, work_dir / (job + ".frd"), work_dir / (job + ".dat"),
+                                                o.calibrated_stretch_max);
+      if (stopped_at_range >= 0) {
+        child.signal(SIGTERM);
+        child.wait();
+        break;
+      }
+    }
     const bool timed_out = o.timeout_s > 0 && seconds > o.timeout_s;
     if (progress.cancelled() || timed_out) {
       child.signal(SIGTERM);
@@ -598,9 +614,9 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
     // A step that stalls after the wall reached its range has given the whole answer: the curve
     // ends at the range either way.
     if (!r.converged && !r.indentation->range_region.empty() && r.increments > 0) {
-      r.solver_message = "the step stopped at " + format_g(100 * r.load_factor, 3) + " % of its depth, after " +
-                         r.indentation->range_region + " reached its calibrated range at " +
-                         format_g(r.indentation->range_depth_mm, 3) + " mm";
+      r.solver_message = (stopped_at_range >= 0 ? "organsmith stopped the step at " : "the step stopped at ") +
+                         format_g(100 * r.load_factor, 3) + " % of its depth, after " + r.indentation->range_region +
+                         " reached its calibrated range at " + format_g(r.indentation->range_depth_mm, 3) + " mm";
       r.converged = true;
     }
   } else {

@@ -121,6 +121,12 @@ IndentationResult evaluate_indentation(const SolverInput& in, const std::vector<
                                        const std::vector<std::pair<double, std::array<double, 3>>>& probe_rf,
                                        const std::vector<std::pair<double, std::array<double, 3>>>& fixed_rf,
                                        const std::map<std::string, double>& calibrated_stretch_max);
+/// While an indentation step runs: the load fraction at which the first region's 99th-percentile
+/// stretch reached its range, once the solver's .frd and .dat both hold an increment at or
+/// beyond it (the curve is then complete and the rest of the step is past the law's data);
+/// −1 before.
+double indentation_range_time(const SolverInput& in, const std::filesystem::path& frd, const std::filesystem::path& dat,
+                              const std::map<std::string, double>& calibrated_stretch_max);
 PressureRange evaluate_pressure_range(const SolverInput& in, const std::vector<SolverIncrement>& increments,
                                       const std::map<std::string, double>& calibrated_stretch_max);
 

@@ -22,7 +22,7 @@ std::vector<SolverIncrement> read_frd_increments(const fs::path& path, std::size
   std::vector<SolverIncrement> out;
   std::string line;
   double block_time = 0.0;
-  bool disp = false;
+  bool disp = false, open_block = false;  // open_block: a DISP block not yet closed by " -3"
   auto field = [&](std::size_t col) { return std::strtod(line.substr(col, 12).c_str(), nullptr); };
   while (std::getline(in, line)) {
     if (line.rfind("  100CL", 0) == 0) {
@@ -32,10 +32,11 @@ std::vector<SolverIncrement> read_frd_increments(const fs::path& path, std::size
     if (line.rfind(" -4", 0) == 0) {
       disp = line.size() >= 13 && line.substr(5, 8).find("DISP") != std::string::npos;
       if (disp) out.push_back({block_time, std::vector<std::array<double, 3>>(node_count, {0, 0, 0})});
+      open_block = disp;
       continue;
     }
     if (line.rfind(" -3", 0) == 0) {
-      disp = false;
+      disp = open_block = false;
       continue;
     }
     if (!disp || line.rfind(" -1", 0) != 0 || line.size() < 13 + 36) continue;
@@ -43,6 +44,8 @@ std::vector<SolverIncrement> read_frd_increments(const fs::path& path, std::size
     if (id < 0 || std::size_t(id) >= node_count) continue;
     for (int k = 0; k < 3; ++k) out.back().displacement_mm[std::size_t(id)][k] = field(13 + 12 * std::size_t(k));
   }
+  // A block the solver was still writing (read while it runs, or cut by a kill) is not a result.
+  if (open_block) out.pop_back();
   return out;
 }
 
@@ -64,6 +67,7 @@ std::vector<std::pair<double, std::array<double, 3>>> read_dat_series(const fs::
       std::stringstream ss(line);
       std::array<double, 3> f{};
       if (ss >> f[0] >> f[1] >> f[2]) {
+        if (in.eof()) break;  // a line the solver was still writing (no newline yet)
         out.push_back({time, f});
         break;
       }
@@ -127,6 +131,19 @@ std::pair<double, std::string> range_crossing(const SolverInput& in, const std::
 }
 
 }  // namespace
+
+double indentation_range_time(const SolverInput& in, const fs::path& frd, const fs::path& dat,
+                              const std::map<std::string, double>& range) {
+  if (!in.indentation() || range.empty() || !fs::exists(frd) || !fs::exists(dat)) return -1.0;
+  const auto incs = read_frd_increments(frd, in.model.nodes_lps_mm.size());
+  const double t = range_crossing(in, incs, range).first;
+  if (t < 0) return -1.0;
+  // The curve interpolates the force between the increments around the crossing: both files
+  // must hold the one after it (the .dat is written behind the .frd).
+  const auto probe = read_dat_series(dat, in.probe_node_set), fixed = read_dat_series(dat, in.fixed_node_set);
+  const bool printed = !probe.empty() && !fixed.empty() && probe.back().first >= t - 1e-12 && fixed.back().first >= t - 1e-12;
+  return printed ? t : -1.0;
+}
 
 IndentationResult evaluate_indentation(const SolverInput& in, const std::vector<SolverIncrement>& incs,
                                        const std::vector<std::pair<double, std::array<double, 3>>>& probe_rf,
