@@ -365,12 +365,14 @@ void write_inp(const SolverModel& m, const std::map<std::string, SolverMaterial>
     s += "** organsmith probe: point " + inp_num(at.x()) + " " + inp_num(at.y()) + " " + inp_num(at.z()) + "; direction " +
          inp_num(dir.x()) + " " + inp_num(dir.y()) + " " + inp_num(dir.z()) + "; diameter " + num(p.diameter_mm) +
          "; depth " + num(sc.probe_depth_mm) + "; area " + num(p.contact_area_mm2) + "; thickness " + num(p.thickness_mm) + "\n";
-    // Even steps of about 0.11 mm of probe travel (4 % of the depth at most, 0.5 % at least),
-    // cut back only where an increment fails. The phantom's gallbladder (9 950 C3D10 nodes, 5.6 mm)
-    // diverged at the first step of 0.19–0.22 mm wherever CalculiX let its increments grow there
-    // (11 cutbacks, 166 iterations); at 0.112 mm every increment converged in two iterations
-    // (50 increments, 103 iterations, none cut back). A bonded flat probe's rim distorts the
-    // elements beside it by the step's travel over their size, whatever the depth.
+    // Even steps of about 0.15 mm of probe travel (4 % of the depth at most, 0.5 % at least),
+    // cut back only where an increment fails. On tetrahedra that fill the organ's gated surface
+    // (mesh.cpp), steps of 0.15 and 0.18 mm converged without a cutback on the phantom's
+    // gallbladder (3 950 C3D10 nodes, 5.6 mm) and on the 3 mm abdomen's from three seeds, two
+    // iterations each; 0.22 mm cut back three times on the phantom. (On the earlier meshes with
+    // clusters of tiny tetrahedra, 0.19 mm already diverged.) A bonded flat probe's rim distorts
+    // the elements beside it by the step's travel over their size, whatever the depth; 0.15 mm
+    // keeps a margin of about 1.5 below the first step seen to fail.
     const double step = std::clamp(kProbeIncrementMm / std::max(sc.probe_depth_mm, 1e-9), 0.005, 0.04);
     s += "*STEP, NLGEOM, INC=1000\n*STATIC\n" + num(step) + ", 1.0, 1e-06, " + num(step) + "\n";
     s += "*CONTROLS, PARAMETERS=TIME INCREMENTATION\n4, 8, 9, 16, 10, 4, 0, 20\n";

@@ -53,7 +53,7 @@ struct SolverScenario {
 /// The automatic indentation depth as a fraction of the organ's thickness along the probe.
 inline constexpr double kProbeDepthFraction = 0.2;
 /// The probe's travel per solver increment, mm (export_solver.cpp says why).
-inline constexpr double kProbeIncrementMm = 0.11;
+inline constexpr double kProbeIncrementMm = 0.15;
 
 /// The indentation probe on a model: where it touches, along which direction it presses, and
 /// the faces it holds (the surface <organ>_probe and node set <organ>_probe_nodes). The probe is
