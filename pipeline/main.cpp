@@ -17,6 +17,7 @@
 #include <spdlog/spdlog.h>
 #include <tbb/global_control.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <iostream>
@@ -139,6 +140,14 @@ void list_written(const RunSummary& summary) {
     for (const auto& [dir, n] : per_dir) std::cout << "    " << dir << "/ (" << n << " DICOM slices)\n";
   }
   std::cout << "  manifest.json\n";
+  // The solver runs on request (a minute or so per organ): say how, where a mesh stage ran or was
+  // reused and simulate was not part of this run.
+  const auto ran = [&](const char* name) {
+    return std::any_of(summary.stages.begin(), summary.stages.end(), [&](const auto& st) { return st.name == name; });
+  };
+  if (ran("mesh") && !ran("simulate"))
+    std::cout << "the organs' load cases in CalculiX (about a minute per organ): organsmith simulate "
+              << summary.out_dir.string() << "\n";
 }
 
 int cmd_run(const std::string& case_path, const std::string& out, bool force, const std::string& until,
