@@ -40,7 +40,8 @@ std::vector<CsvRow> parse_csv_rows(const std::string& text, const std::filesyste
   csv_parser parser;
   if (csv_init(&parser, CSV_STRICT | CSV_STRICT_FINI) != 0) throw Error(code, "cannot start the CSV reader", source);
   Collector c;
-  std::istringstream in(text);
+  // A UTF-8 byte-order mark (what spreadsheet programs put first) is not part of the first field.
+  std::istringstream in(text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? text.substr(3) : text);
   std::string line;
   bool in_quote = false;  // a quoted field spans this line break: '#' lines are data there
   auto fail = [&](const std::string& what) {

@@ -25,8 +25,9 @@ struct CsvTable {
   int column(const std::string& name) const;
 };
 
-/// Every row of CSV text, header included, as written (rows may differ in length). Blank lines
-/// and lines starting with '#' are skipped; spaces around unquoted fields are dropped. Throws an
+/// Every row of CSV text, header included, as written (rows may differ in length). A leading UTF-8
+/// byte-order mark is dropped; blank lines and lines starting with '#' are skipped; spaces around
+/// unquoted fields are dropped. Throws an
 /// Error with `code`, naming `source` and the line, for an unterminated quote.
 std::vector<CsvRow> parse_csv_rows(const std::string& text, const std::filesystem::path& source, ExitCode code);
 

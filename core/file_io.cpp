@@ -11,9 +11,19 @@
 namespace organsmith {
 
 std::optional<std::string> read_file(const std::filesystem::path& path) {
+  // A directory opens as a stream on Linux and fails only when read (libstdc++ then throws from
+  // its underflow): refuse it here, and any other read error with it.
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) return std::nullopt;
   std::ifstream in(path, std::ios::binary);
   if (!in) return std::nullopt;
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  try {
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    if (in.bad()) return std::nullopt;
+    return bytes;
+  } catch (const std::ios_base::failure&) {
+    return std::nullopt;
+  }
 }
 
 void write_file_atomic(const std::filesystem::path& path, std::string_view bytes) {

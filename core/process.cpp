@@ -86,7 +86,7 @@ std::optional<int> ChildProcess::poll() {
   if (exit_ || pid_ <= 0) return exit_;
   int status = 0;
   const pid_t w = waitpid(pid_, &status, WNOHANG);
-  if (w == pid_) exit_ = decode(status);
+  if (w == pid_) exit_ = decode(status), signal_ = WIFSIGNALED(status) ? WTERMSIG(status) : 0;
   return exit_;
 }
 
@@ -96,6 +96,7 @@ int ChildProcess::wait() {
   while (waitpid(pid_, &status, 0) < 0)
     if (errno != EINTR) return -1;
   exit_ = decode(status);
+  signal_ = WIFSIGNALED(status) ? WTERMSIG(status) : 0;
   return *exit_;
 }
 

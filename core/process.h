@@ -40,11 +40,15 @@ class ChildProcess {
   int wait();
   /// Sends `signal` (to the group when own_process_group) unless the child has ended.
   void signal(int signal);
+  /// The signal that ended the child (0 when it exited by itself or is still running): tells a
+  /// child's own exit code above 128 from a death by signal.
+  int end_signal() const { return signal_; }
 
  private:
   int pid_ = -1;
   bool group_ = false;
   std::optional<int> exit_;
+  int signal_ = 0;
 };
 
 struct CommandResult {

@@ -171,6 +171,8 @@ inline void unshield_all(toml::node& node) {
 /// "<what> is not valid TOML at line N: <description>" naming `source` (may be empty), with `hint`.
 inline toml::table parse_toml(std::string_view text, const std::filesystem::path& source, const std::string& what,
                               std::string hint) {
+  // A UTF-8 byte-order mark (some editors write one) is not part of the first key.
+  if (text.substr(0, 3) == "\xEF\xBB\xBF") text.remove_prefix(3);
   if (const auto [line, col] = toml_text::first_private_use(text); line > 0)
     throw CaseFileError(what + " is not valid at line " + std::to_string(line) + ", column " + std::to_string(col) +
                             ": a private-use Unicode character (U+E000–U+F8FF)",

@@ -12,6 +12,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <fstream>
 #include <sstream>
 
 namespace organsmith {
@@ -138,8 +139,19 @@ void write_dicom_series(const Volume& volume, const fs::path& dir, const DicomSe
 
     char name[32];
     std::snprintf(name, sizeof name, "IM%04lld.dcm", static_cast<long long>(k + 1));
-    writer.SetFileName((dir / name).string().c_str());
+    // GDCM asserts (and aborts) when its file stream fails half-way, as on a full disk: the slice
+    // is encoded into memory, and organsmith writes and checks the file itself.
+    std::ostringstream encoded(std::ios::out | std::ios::binary);
+    writer.SetStream(encoded);
     if (!writer.Write()) {
+      failed = true;
+      return;
+    }
+    const std::string bytes = encoded.str();
+    std::ofstream file(dir / name, std::ios::binary | std::ios::trunc);
+    file.write(bytes.data(), std::streamsize(bytes.size()));
+    file.flush();
+    if (!file) {
       failed = true;
       return;
     }

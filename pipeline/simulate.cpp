@@ -20,6 +20,7 @@
 #include <cmath>
 #include <csignal>
 #include <cstdlib>
+#include <cstring>
 #include <fstream>
 #include <map>
 #include <sstream>
@@ -247,6 +248,8 @@ FrdResult read_frd(const fs::path& path, std::size_t node_count) {
 namespace {
 
 /// Degree-4 rule on the reference triangle (Dunavant, 6 points); weights sum to 1.
+/// Below this much free space where the solver works, a failed run is put down to the disk.
+constexpr std::uintmax_t kSolverMinFreeBytes = 4u << 20;
 constexpr double kQa = 0.445948490915965, kQwa = 0.223381589678011;
 constexpr double kQb = 0.091576213509771, kQwb = 0.109951743655322;
 const double kQuad[6][3] = {{kQa, kQa, kQwa}, {1 - 2 * kQa, kQa, kQwa}, {kQa, 1 - 2 * kQa, kQwa},
@@ -598,6 +601,26 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
   }
   r.solver_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   read_sta(work_dir / (job + ".sta"), r);
+  const bool job_finished = exit_code == 0 && read_file(log).value_or("").find("Job finished") != std::string::npos;
+  if (stopped_at_range < 0 && !job_finished) {
+    // Causes outside the mechanics first: a full disk (ccx may even exit 0 when its last writes
+    // fail), or the solver ended by a signal.
+    std::error_code space_ec;
+    const fs::space_info space = fs::space(work_dir, space_ec);
+    if (!space_ec && space.available < kSolverMinFreeBytes)
+      throw OutputError("the disk is full: CalculiX could not write its results for " + r.organ + " (" +
+                            std::to_string(space.available / 1024) + " KiB free)",
+                        work_dir, "free some space (a solver run writes tens of MB) and run simulate again");
+    if (const int sig = child.end_signal(); sig != 0)
+      throw SimulationError(ExitCode::solver_failed,
+                            r.organ + ": CalculiX was ended by signal " + std::to_string(sig) + " (" + strsignal(sig) +
+                                ") at " + format_g(100 * r.load_factor, 3) + " % of the load",
+                            work_dir / "solver.log",
+                            sig == SIGKILL ? "something outside organsmith killed the solver (the system's out-of-memory "
+                                             "killer, an operator or a scheduler's limit); run simulate again"
+                                           : "the solver crashed: check the INP it was given (" + inp.string() +
+                                                 "), or run simulate again");
+  }
   const std::string text = read_file(log).value_or("");
   const bool finished = exit_code == 0 && text.find("Job finished") != std::string::npos;
   r.converged = finished && r.load_factor >= 1.0 - 1e-9;

@@ -78,6 +78,10 @@ ScriptedDevice::ScriptedDevice(std::vector<double> t, std::vector<Eigen::Vector3
       throw bad("time does not increase at sample " + std::to_string(i) + " (" + std::to_string(t_[i - 1]) + " s, then " +
                 std::to_string(t_[i]) + " s)");
   }
+  // The replay keeps a record per 1 kHz tick: an hour is 3.6 million of them (~100 MB).
+  if (duration_s() > kMaxTrajectorySpanS)
+    throw bad("the trajectory spans " + std::to_string(duration_s()) + " s, more than the limit of " +
+              std::to_string(int(kMaxTrajectorySpanS)) + " s (one hour)");
 }
 
 ScriptedDevice ScriptedDevice::read_csv(const fs::path& path) {

@@ -124,10 +124,14 @@ class HapticDevice {
 
 /// Replays a recorded trajectory (t_s, x, y, z in LPS mm), linearly interpolated, holding the
 /// last point after the end. Used by tests, benchmarks, `organsmith haptics` and movies.
+/// The longest trajectory a ScriptedDevice replays, seconds (its trace holds a record per tick).
+inline constexpr double kMaxTrajectorySpanS = 3600.0;
+
 class ScriptedDevice final : public HapticDevice {
  public:
   /// Throws InputError (exit code 18) naming `source` when there are fewer than 2 samples, a
-  /// value is not finite, or time does not strictly increase.
+  /// value is not finite, time does not strictly increase, or it spans more than
+  /// kMaxTrajectorySpanS.
   ScriptedDevice(std::vector<double> t_s, std::vector<Eigen::Vector3d> points_lps_mm,
                  const std::filesystem::path& source = {});
   /// Reads CSV with a header naming t_s, x, y, z (x_mm … also accepted). Throws InputError with

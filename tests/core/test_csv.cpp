@@ -30,6 +30,18 @@ TEST(Csv, ReadsQuotedFieldsCommentsAndLineNumbers) {
   EXPECT_EQ(t.column("missing"), -1);
 }
 
+// Spreadsheet programs begin their CSV with a UTF-8 byte-order mark: it is not part of the first
+// column's name (nor of a first data field when a file has no header).
+TEST(Csv, AByteOrderMarkIsNotPartOfTheFirstField) {
+  const CsvTable t = parse_csv("\xEF\xBB\xBFx,y\r\n1,2\r\n", "bom.csv", ExitCode::case_file);
+  ASSERT_EQ(t.header.fields, (std::vector<std::string>{"x", "y"}));
+  EXPECT_EQ(t.column("x"), 0);
+  EXPECT_EQ(t.header.line, 1);
+  EXPECT_EQ(parse_csv_rows("\xEF\xBB\xBF" "1.5,2\n", "bom.csv", ExitCode::case_file).front().fields.front(), "1.5");
+  // Only at the start: elsewhere the bytes are data.
+  EXPECT_EQ(parse_csv("x\n\xEF\xBB\xBF" "a\n", "bom.csv", ExitCode::case_file).rows.front().fields.front(), "\xEF\xBB\xBF" "a");
+}
+
 TEST(Csv, RejectsRaggedRowsAndOpenQuotesNamingTheLine) {
   auto message = [](const std::string& text) -> std::string {
     try {

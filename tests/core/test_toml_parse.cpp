@@ -27,6 +27,11 @@ TEST(TomlParse, TheShieldedCodePointsAreTheThreeBlocksTomlPlusPlusLeavesUnhandle
   }
 }
 
+TEST(TomlParse, AByteOrderMarkBeforeTheFirstKeyIsDropped) {
+  const toml::table t = parse_toml("\xEF\xBB\xBF[case]\nname = \"x\"\n", "bom.toml", "the case file", "");
+  EXPECT_EQ(t["case"]["name"].value_or(std::string()), "x");
+}
+
 TEST(TomlParse, MalformedUtf8IsLeftForTheParserToRefuse) {
   const std::string bad = "x = \"\xc3\" \xe2\x82 \xed\xa0\x80\n";  // cut sequences and a surrogate
   EXPECT_EQ(toml_text::shield(bad), bad);

@@ -135,6 +135,18 @@ TEST_F(HapticsCli, BadTrajectoriesAndMissingSurfacesAreClearErrors) {
   EXPECT_NE(log.find("does not increase"), std::string::npos) << log;
   EXPECT_FALSE(fs::exists(dir_ / "r_t.json"));
 
+  // Samples a billion seconds apart: refused with the limit, before anything is allocated for them.
+  std::ofstream(dir_ / "long.csv") << "t_s,x,y,z\n0,0,0,0\n1e9,1,0,0\n";
+  for (const char* offline : {"", " --offline"}) {
+    EXPECT_EQ(run_cli("haptics " + q(dir_ / "out") + " --trajectory " + q(dir_ / "long.csv") + offline + " --out " + q(dir_ / "r_l.json"), &log), 18) << log;
+    EXPECT_NE(log.find("long.csv"), std::string::npos) << log;
+    EXPECT_NE(log.find("limit of 3600 s"), std::string::npos) << log;
+    EXPECT_FALSE(fs::exists(dir_ / "r_l.json"));
+  }
+  // A directory where the trajectory file should be: exit 3 naming it.
+  EXPECT_EQ(run_cli("haptics " + q(dir_ / "out") + " --trajectory " + q(dir_ / "out") + " --out " + q(dir_ / "r_d.json"), &log), 3) << log;
+  EXPECT_NE(log.find((dir_ / "out").string()), std::string::npos) << log;
+
   // An output directory without meshes: `guide` names the missing surface and writes nothing.
   fs::create_directories(dir_ / "nomesh");
   fs::copy_file(dir_ / "out" / "labels.nii.gz", dir_ / "nomesh" / "labels.nii.gz");

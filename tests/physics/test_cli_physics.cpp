@@ -81,6 +81,31 @@ TEST(PhysicsCli, BadDataExitsWithCalibrationCodeAndWritesNothing) {
   EXPECT_EQ(run_cli("calibrate --model nonsense --data '" + (s.path() / "wall.csv").string() + "' --out '" +
                 (s.path() / "o").string() + "'", &log), 2) << log;
   EXPECT_FALSE(fs::exists(s.path() / "o"));
+  // A directory given as the data file: exit 3 naming it (no internal error from the stream).
+  fs::create_directories(s.path() / "data_dir");
+  EXPECT_EQ(run_cli("calibrate --model fung-wall --data '" + (s.path() / "data_dir").string() + "' --out '" +
+                (s.path() / "o").string() + "'", &log), 3) << log;
+  EXPECT_NE(log.find("data_dir"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(s.path() / "o"));
+}
+
+// What a spreadsheet program saves: a UTF-8 byte-order mark first and CRLF line ends. The fit is
+// the one of the same data without them.
+TEST(PhysicsCli, CalibrationDataWithAByteOrderMarkFitsAsWithout) {
+  ScratchDir s("physics-cli-bom");
+  write_wall_csv(s.path() / "wall.csv");
+  std::string plain = read_file(s.path() / "wall.csv"), excel = "\xEF\xBB\xBF";
+  for (char c : plain) excel += c == '\n' ? std::string("\r\n") : std::string(1, c);
+  std::ofstream(s.path() / "excel.csv", std::ios::binary) << excel;
+  std::string log;
+  for (const char* name : {"wall", "excel"})
+    ASSERT_EQ(run_cli(std::string("calibrate --model fung-wall --data '") + (s.path() / (std::string(name) + ".csv")).string() +
+                          "' --out '" + (s.path() / name).string() + "'", &log), 0) << log;
+  const auto a = nlohmann::json::parse(read_file(s.path() / "wall" / "params.json"));
+  const auto b = nlohmann::json::parse(read_file(s.path() / "excel" / "params.json"));
+  ASSERT_EQ(a["parameters"].size(), b["parameters"].size());
+  for (std::size_t k = 0; k < a["parameters"].size(); ++k)
+    EXPECT_EQ(a["parameters"][k]["value"], b["parameters"][k]["value"]) << a["parameters"][k]["name"];
 }
 
 TEST(PhysicsCli, MaterialsListsThesisTables) {

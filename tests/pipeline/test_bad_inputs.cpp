@@ -2,6 +2,7 @@
 // seconds, naming what is wrong, and leaves nothing half-written (reliability).
 
 #include "core/errors.h"
+#include "core/process.h"
 #include "core/sha256.h"
 #include "pipeline/image_io.h"
 #include "tests/support/test_support.h"
@@ -16,6 +17,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <cstdlib>
 #include <fstream>
 #include <thread>
 
@@ -193,4 +195,89 @@ TEST(BadInputs, ADeviceOrAPipeIsNoScan) {
     EXPECT_NE(out.find("neither a file nor a directory"), std::string::npos) << out;
     EXPECT_NE(out.find(input.string()), std::string::npos) << out;
   }
+}
+
+// A disk that fills up while DICOM slices are written (`phantom`, and `run` of the phantom case):
+// exit 30 naming the folder, no abort from the DICOM library, nothing half-written left behind;
+// the same command on a disk with room then completes.
+TEST(BadInputs, AFullDiskWhileWritingDicomIsExit30AndLeavesNothing) {
+  organsmith::testing::SmallDisk disk("fulldisk", 1024);
+  if (!disk.mounted()) GTEST_SKIP() << disk.why();
+  ScratchDir tmp("fulldisk-case");
+  std::ofstream(tmp / "case.toml") << "[case]\nname = \"full\"\ninput = \"phantom\"\n[phantom]\nsize = 128\n"
+                                      "[[organ]]\nname = \"gallbladder\"\n";
+  const std::vector<std::pair<std::string, std::string>> commands = {
+      {"phantom", "phantom --out " + quoted(disk / "ph") + " --size 128"},
+      {"run", "run " + quoted(tmp / "case.toml") + " --out " + quoted(disk / "run")}};
+  for (const auto& [name, args] : commands) {
+    SCOPED_TRACE(name);
+    const auto r = run_cli(args);
+    EXPECT_EQ(r.exit_code, int(ExitCode::output)) << r.output;
+    EXPECT_NE(r.output.find(disk.path().string()), std::string::npos) << r.output;
+    const fs::path out = disk / (name == "phantom" ? "ph" : "run");
+    std::size_t dicom_left = 0;
+    if (fs::exists(out)) {
+      EXPECT_FALSE(has_staging_leftover(out));
+      for (const auto& e : fs::recursive_directory_iterator(out)) dicom_left += e.path().extension() == ".dcm";
+    }
+    EXPECT_EQ(dicom_left, 0u) << "DICOM slices left behind in " << out;
+  }
+  // With room, the same phantom completes.
+  const auto ok = run_cli("phantom --out " + quoted(tmp / "ph") + " --size 128");
+  EXPECT_EQ(ok.exit_code, 0) << ok.output;
+}
+
+// The solver's bad days: CalculiX killed from outside mid-step, then a disk that fills while it
+// writes. Each ends in its documented code (71 naming the signal; 30 naming the folder) with no
+// results and no staging folder left; with the solver left alone and room on the disk, the rerun
+// completes.
+TEST(BadInputs, SolverKilledOrDiskFullDuringSimulateThenRerun) {
+  if (organsmith::find_on_path("ccx").empty()) GTEST_SKIP() << "CalculiX (ccx) not installed: apt-get install calculix-ccx";
+  organsmith::testing::SmallDisk disk("simfault", 96 * 1024);
+  if (!disk.mounted()) GTEST_SKIP() << disk.why();
+  ScratchDir tmp("simfault-case");
+  std::ofstream(tmp / "case.toml") << "[case]\ninput = \"phantom\"\n[phantom]\nsize = 256\n[[organ]]\nname = \"gallbladder\"\n"
+                                      "[stages.mesh]\nedge_mm = 3.0\ntet_edge_mm = 6.0\nformats = [\"inp\"]\n";
+  const fs::path out = disk / "out";
+  std::string log;
+  ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out) + " --until mesh", &log), 0) << log;
+
+  // SIGKILL to the solver once it has converged an increment or two.
+  const pid_t pid = spawn_cli({"simulate", out.string(), "--organ", "gallbladder"}, tmp / "sim.log");
+  bool stepping = false;
+  for (const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+       !stepping && std::chrono::steady_clock::now() < until;) {
+    std::error_code ec;
+    for (auto it = fs::recursive_directory_iterator(out, ec); !ec && it != fs::recursive_directory_iterator(); it.increment(ec))
+      if (it->path().filename() == "job.sta" && fs::file_size(it->path(), ec) > 250) stepping = true;
+    if (!stepping) std::this_thread::sleep_for(std::chrono::milliseconds(50));
+  }
+  ASSERT_TRUE(stepping) << organsmith::testing::read_file(tmp / "sim.log");
+  ASSERT_EQ(std::system(("pkill -KILL -P " + std::to_string(pid)).c_str()), 0);
+  EXPECT_EQ(wait_exit(pid, std::chrono::seconds(60)), int(ExitCode::solver_failed)) << organsmith::testing::read_file(tmp / "sim.log");
+  const std::string killed = organsmith::testing::read_file(tmp / "sim.log");
+  EXPECT_NE(killed.find("signal 9"), std::string::npos) << killed;
+  EXPECT_NE(killed.find("run simulate again"), std::string::npos) << killed;
+  EXPECT_FALSE(fs::exists(out / "simulation"));
+  EXPECT_FALSE(has_staging_leftover(out));
+
+  // The disk full but for 1.5 MiB: the solver's results do not fit.
+  {
+    const std::uintmax_t keep = 3u << 19, available = fs::space(disk.path()).available;
+    ASSERT_GT(available, keep);
+    std::ofstream filler(disk / "filler", std::ios::binary);
+    const std::string chunk(1u << 16, 'x');
+    for (std::uintmax_t left = available - keep; left >= chunk.size(); left -= chunk.size()) filler.write(chunk.data(), std::streamsize(chunk.size()));
+  }
+  const auto full = run_cli("simulate " + quoted(out) + " --organ gallbladder");
+  EXPECT_EQ(full.exit_code, int(ExitCode::output)) << full.output;
+  EXPECT_NE(full.output.find(out.string()), std::string::npos) << full.output;
+  EXPECT_FALSE(fs::exists(out / "simulation"));
+  EXPECT_FALSE(has_staging_leftover(out));
+
+  fs::remove(disk / "filler");
+  ASSERT_EQ(run_cli("simulate " + quoted(out) + " --organ gallbladder", &log), 0) << log;
+  const nlohmann::json s = organsmith::testing::read_json(out / "simulation" / "gallbladder.json");
+  EXPECT_TRUE(s["converged"].get<bool>()) << s.dump(2);
+  EXPECT_FALSE(has_staging_leftover(out));
 }

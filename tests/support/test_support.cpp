@@ -6,8 +6,11 @@
 #include <fstream>
 
 #include <array>
+#include <cerrno>
 #include <cstdio>
+#include <cstring>
 #include <random>
+#include <sys/mount.h>
 #include <sys/wait.h>
 
 namespace organsmith::testing {
@@ -29,6 +32,19 @@ ScratchDir::ScratchDir(const std::string& tag) {
 ScratchDir::~ScratchDir() {
   std::error_code ec;
   fs::remove_all(path_, ec);
+}
+
+SmallDisk::SmallDisk(const std::string& tag, int size_kib) : dir_(tag) {
+  const std::string opts = "size=" + std::to_string(size_kib) + "k,mode=0755";
+  if (::mount("tmpfs", dir_.path().c_str(), "tmpfs", 0, opts.c_str()) == 0)
+    mounted_ = true;
+  else
+    why_ = std::string("cannot mount a tmpfs for the full-disk test (") + std::strerror(errno) +
+           "): it needs CAP_SYS_ADMIN, as root has here and in CI";
+}
+
+SmallDisk::~SmallDisk() {
+  if (mounted_) ::umount2(dir_.path().c_str(), MNT_DETACH);
 }
 
 namespace {

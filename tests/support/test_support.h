@@ -25,6 +25,27 @@ class ScratchDir {
   std::filesystem::path path_;
 };
 
+/// A small file system of its own (tmpfs of `size_kib`), mounted on a fresh scratch directory and
+/// unmounted when the object dies (also when the test fails): a disk that fills up. Mounting needs
+/// CAP_SYS_ADMIN (root here and in CI); where it is refused, `mounted()` is false and `why()` says
+/// why, for GTEST_SKIP.
+class SmallDisk {
+ public:
+  SmallDisk(const std::string& tag, int size_kib);
+  ~SmallDisk();
+  SmallDisk(const SmallDisk&) = delete;
+  SmallDisk& operator=(const SmallDisk&) = delete;
+  bool mounted() const { return mounted_; }
+  const std::string& why() const { return why_; }
+  const std::filesystem::path& path() const { return dir_.path(); }
+  std::filesystem::path operator/(const std::string& p) const { return dir_ / p; }
+
+ private:
+  ScratchDir dir_;
+  bool mounted_ = false;
+  std::string why_;
+};
+
 struct CliResult {
   int exit_code = -1;
   std::string output;  ///< stdout and stderr together
