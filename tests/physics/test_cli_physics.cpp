@@ -87,6 +87,14 @@ TEST(PhysicsCli, BadDataExitsWithCalibrationCodeAndWritesNothing) {
                 (s.path() / "o").string() + "'", &log), 3) << log;
   EXPECT_NE(log.find("data_dir"), std::string::npos) << log;
   EXPECT_FALSE(fs::exists(s.path() / "o"));
+  // A file far larger than any test series (sparse: no disk used) is refused before it is read.
+  std::ofstream(s.path() / "huge.csv") << "stretch,stress_pa\n";
+  fs::resize_file(s.path() / "huge.csv", std::uintmax_t(1) << 30);
+  EXPECT_EQ(run_cli("calibrate --model fung-wall --data '" + (s.path() / "huge.csv").string() + "' --out '" +
+                (s.path() / "o").string() + "'", &log), 21) << log;
+  EXPECT_NE(log.find("huge.csv"), std::string::npos) << log;
+  EXPECT_NE(log.find("limit of 64 MiB"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(s.path() / "o"));
 }
 
 // What a spreadsheet program saves: a UTF-8 byte-order mark first and CRLF line ends. The fit is
