@@ -247,9 +247,9 @@ FrdResult read_frd(const fs::path& path, std::size_t node_count) {
 
 namespace {
 
-/// Degree-4 rule on the reference triangle (Dunavant, 6 points); weights sum to 1.
 /// Below this much free space where the solver works, a failed run is put down to the disk.
 constexpr std::uintmax_t kSolverMinFreeBytes = 4u << 20;
+/// Degree-4 rule on the reference triangle (Dunavant, 6 points); weights sum to 1.
 constexpr double kQa = 0.445948490915965, kQwa = 0.223381589678011;
 constexpr double kQb = 0.091576213509771, kQwb = 0.109951743655322;
 const double kQuad[6][3] = {{kQa, kQa, kQwa}, {1 - 2 * kQa, kQa, kQwa}, {kQa, 1 - 2 * kQa, kQwa},
@@ -601,8 +601,9 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
   }
   r.solver_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   read_sta(work_dir / (job + ".sta"), r);
-  const bool job_finished = exit_code == 0 && read_file(log).value_or("").find("Job finished") != std::string::npos;
-  if (stopped_at_range < 0 && !job_finished) {
+  const std::string text = read_file(log).value_or("");
+  const bool finished = exit_code == 0 && text.find("Job finished") != std::string::npos;
+  if (stopped_at_range < 0 && !finished) {
     // Causes outside the mechanics first: a full disk (ccx may even exit 0 when its last writes
     // fail), or the solver ended by a signal.
     std::error_code space_ec;
@@ -621,8 +622,6 @@ Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const Sim
                                            : "the solver crashed: check the INP it was given (" + inp.string() +
                                                  "), or run simulate again");
   }
-  const std::string text = read_file(log).value_or("");
-  const bool finished = exit_code == 0 && text.find("Job finished") != std::string::npos;
   r.converged = finished && r.load_factor >= 1.0 - 1e-9;
   const std::size_t nodes = sim.input.model.nodes_lps_mm.size();
   std::vector<SolverIncrement> incs;

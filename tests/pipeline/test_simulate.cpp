@@ -1,3 +1,6 @@
+// Over 400 lines: each test runs CalculiX on one organ and case and checks its answer against a
+// closed-form estimate; the estimates (thin-walled shell, ring section, flat punch) and the shared
+// case runner belong beside the tests that use them.
 // The organs' load cases run unedited in CalculiX through `organsmith run` ([stages.simulate]) and
 // `organsmith simulate`: converged, the fixed set's reaction balances the load (the probe's force,
 // or the pressure integrated over the deformed loaded faces), and the answer lies within an order of
