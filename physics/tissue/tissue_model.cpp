@@ -1,0 +1,444 @@
+#include "physics/tissue/tissue_model.h"
+
+#include "core/errors.h"
+
+#include <Eigen/Dense>
+#include <Eigen/SparseCholesky>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <set>
+#include <string>
+
+namespace organsmith::physics {
+
+namespace {
+
+struct QuadPoint {
+  std::array<double, 30> g;  ///< dN_a/dX, node-major (a*3 + j)
+  double w = 0.0;            ///< weight × reference volume factor
+};
+
+// Shape-function gradients with respect to the natural coordinates (ξ, η, ζ) of a 4- or
+// 10-node tetrahedron at one point; barycentric L1 = 1 − ξ − η − ζ, L2 = ξ, L3 = η, L4 = ζ.
+void natural_gradients(int npe, const Eigen::Vector3d& xi, Eigen::Matrix<double, 10, 3>& dN) {
+  dN.setZero();
+  const double L[4] = {1 - xi.sum(), xi[0], xi[1], xi[2]};
+  // dL_i/dξ_j
+  const double dL[4][3] = {{-1, -1, -1}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+  if (npe == 4) {
+    for (int a = 0; a < 4; ++a)
+      for (int j = 0; j < 3; ++j) dN(a, j) = dL[a][j];
+    return;
+  }
+  for (int a = 0; a < 4; ++a)  // corners: L(2L − 1)
+    for (int j = 0; j < 3; ++j) dN(a, j) = (4 * L[a] - 1) * dL[a][j];
+  const int edge[6][2] = {{0, 1}, {1, 2}, {2, 0}, {0, 3}, {1, 3}, {2, 3}};
+  for (int m = 0; m < 6; ++m) {  // mid-edge: 4 L_i L_j
+    const int i = edge[m][0], k = edge[m][1];
+    for (int j = 0; j < 3; ++j) dN(4 + m, j) = 4 * (dL[i][j] * L[k] + L[i] * dL[k][j]);
+  }
+}
+
+}  // namespace
+
+TissueMesh corner_mesh(const TissueMesh& q, std::vector<std::int32_t>* new_id) {
+  if (q.nodes_per_element == 4) {
+    if (new_id) {
+      new_id->resize(q.nodes_mm.size());
+      for (std::size_t i = 0; i < new_id->size(); ++i) (*new_id)[i] = std::int32_t(i);
+    }
+    return q;
+  }
+  std::vector<std::int32_t> id(q.nodes_mm.size(), -1);
+  TissueMesh r;
+  r.nodes_per_element = 4;
+  r.laws = q.laws;
+  r.law_of_element = q.law_of_element;
+  for (const auto& e : q.elements) {
+    std::array<std::int32_t, 10> c;
+    c.fill(-1);
+    for (int k = 0; k < 4; ++k) {
+      if (id[e[k]] < 0) {
+        id[e[k]] = std::int32_t(r.nodes_mm.size());
+        r.nodes_mm.push_back(q.nodes_mm[e[k]]);
+      }
+      c[k] = id[e[k]];
+    }
+    r.elements.push_back(c);
+  }
+  if (new_id) *new_id = std::move(id);
+  return r;
+}
+
+struct TissueModel::Impl {
+  int npe = 4;
+  std::vector<std::vector<QuadPoint>> qp;   ///< per element
+  std::vector<double> mass;                  ///< lumped, per node (t)
+  Eigen::SparseMatrix<double> K;             ///< full pattern, 3N × 3N
+
+  std::vector<std::array<std::int32_t, 3>> block_cols;  ///< value index of rows 3a..3a+2 in columns 3b+k
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> solver;
+  bool analysed = false;
+  Eigen::VectorXd f;                         ///< internal force at the last evaluation
+  std::vector<char> constrained;             ///< per DOF
+};
+
+TissueModel::TissueModel(TissueMesh mesh) : mesh_(std::move(mesh)), impl_(std::make_unique<Impl>()) {
+  Impl& I = *impl_;
+  const std::size_t n = mesh_.nodes_mm.size();
+  const int npe = mesh_.nodes_per_element;
+  if (n == 0 || mesh_.elements.empty()) throw InputError(ExitCode::unsupported_input, "the tissue model has no nodes or no elements");
+  if (npe != 4 && npe != 10) throw InputError(ExitCode::unsupported_input, "tetrahedra need 4 or 10 nodes");
+  if (mesh_.law_of_element.size() != mesh_.elements.size())
+    throw InputError(ExitCode::unsupported_input, "the tissue model needs one law per element");
+  I.npe = npe;
+  I.mass.assign(n, 0.0);
+  // Quadrature: one point (linear) or the four-point rule CalculiX uses for C3D10.
+  std::vector<std::pair<Eigen::Vector3d, double>> rule;
+  if (npe == 4) rule.push_back({Eigen::Vector3d(0.25, 0.25, 0.25), 1.0 / 6.0});
+  else {
+    const double a = 0.5854101966249685, b = 0.1381966011250105;
+    for (const Eigen::Vector3d& p : {Eigen::Vector3d(b, b, b), Eigen::Vector3d(a, b, b), Eigen::Vector3d(b, a, b), Eigen::Vector3d(b, b, a)})
+      rule.push_back({p, 1.0 / 24.0});
+  }
+  I.qp.resize(mesh_.elements.size());
+  for (std::size_t e = 0; e < mesh_.elements.size(); ++e) {
+    const auto& el = mesh_.elements[e];
+    for (int a = 0; a < npe; ++a)
+      if (el[a] < 0 || std::size_t(el[a]) >= n)
+        throw InputError(ExitCode::unsupported_input, "element " + std::to_string(e + 1) + " names a node that does not exist");
+    if (mesh_.law_of_element[e] < 0 || std::size_t(mesh_.law_of_element[e]) >= mesh_.laws.size())
+      throw InputError(ExitCode::unsupported_input, "element " + std::to_string(e + 1) + " has no law");
+    double vol = 0.0;
+    for (const auto& [xi, w] : rule) {
+      Eigen::Matrix<double, 10, 3> dN;
+      natural_gradients(npe, xi, dN);
+      Eigen::Matrix3d Jm = Eigen::Matrix3d::Zero();  // dX/dξ
+      for (int a = 0; a < npe; ++a) Jm += mesh_.nodes_mm[el[a]] * dN.row(a);
+      const double det = Jm.determinant();
+      if (!(det > 0))
+        throw InputError(ExitCode::unsupported_input, "element " + std::to_string(e + 1) + " has no positive volume");
+      const Eigen::Matrix3d Jinv = Jm.inverse();
+      QuadPoint q;
+      q.g.fill(0.0);
+      for (int a = 0; a < npe; ++a) {
+        const Eigen::RowVector3d g = dN.row(a) * Jinv;
+        for (int j = 0; j < 3; ++j) q.g[a * 3 + j] = g[j];
+      }
+      q.w = w * det;
+      vol += q.w;
+      I.qp[e].push_back(q);
+    }
+    for (int a = 0; a < npe; ++a) I.mass[el[a]] += density_t_per_mm3 * vol / npe;
+  }
+  // Sparse pattern: node adjacency through elements, 3×3 dense blocks.
+  std::vector<std::set<std::int32_t>> adj(n);
+  for (const auto& el : mesh_.elements)
+    for (int a = 0; a < npe; ++a)
+      for (int b = 0; b < npe; ++b) adj[el[a]].insert(el[b]);
+  std::vector<Eigen::Triplet<double>> t;
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::int32_t j : adj[i])
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) t.emplace_back(int(3 * i + r), int(3 * j + c), 0.0);
+  I.K.resize(int(3 * n), int(3 * n));
+  I.K.setFromTriplets(t.begin(), t.end());
+  I.K.makeCompressed();
+  const int* outer = I.K.outerIndexPtr();
+  const int* inner = I.K.innerIndexPtr();
+  auto find = [&](int row, int col) {
+    const int* b = inner + outer[col];
+    const int* e = inner + outer[col + 1];
+    return std::int32_t(std::lower_bound(b, e, row) - inner);
+  };
+  I.block_cols.reserve(mesh_.elements.size() * npe * npe);
+  for (const auto& el : mesh_.elements)
+    for (int a = 0; a < npe; ++a)
+      for (int b = 0; b < npe; ++b)
+        I.block_cols.push_back({find(3 * el[a], 3 * el[b]), find(3 * el[a], 3 * el[b] + 1), find(3 * el[a], 3 * el[b] + 2)});
+  u_ = Eigen::VectorXd::Zero(3 * n);
+  v_ = Eigen::VectorXd::Zero(3 * n);
+  I.f = Eigen::VectorXd::Zero(3 * n);
+  I.constrained.assign(3 * n, 0);
+}
+
+TissueModel::~TissueModel() = default;
+
+void TissueModel::reset() {
+  u_.setZero();
+  v_.setZero();
+  impl_->f.setZero();
+  held_stiffness_.setZero();
+}
+
+void TissueModel::set_boundary(std::vector<std::int32_t> fixed, std::vector<std::int32_t> held) {
+  const std::size_t n = node_count();
+  for (auto* s : {&fixed, &held}) {
+    std::sort(s->begin(), s->end());
+    s->erase(std::unique(s->begin(), s->end()), s->end());
+    for (std::int32_t i : *s)
+      if (i < 0 || std::size_t(i) >= n) throw InputError(ExitCode::unsupported_input, "a boundary node does not exist");
+  }
+  std::vector<std::int32_t> h;
+  std::set_difference(held.begin(), held.end(), fixed.begin(), fixed.end(), std::back_inserter(h));
+  fixed_ = std::move(fixed);
+  held_ = std::move(h);
+  impl_->constrained.assign(3 * n, 0);
+  for (auto* s : {&fixed_, &held_})
+    for (std::int32_t i : *s)
+      for (int k = 0; k < 3; ++k) impl_->constrained[3 * i + k] = 1;
+}
+
+namespace {
+
+// Energy, internal force and (optionally) tangent of the whole mesh at displacement u. False
+// when an element is inverted.
+bool evaluate(const TissueMesh& mesh, const std::vector<std::vector<QuadPoint>>& qps, const Eigen::VectorXd& u,
+              double& energy, Eigen::VectorXd& f, Eigen::SparseMatrix<double>* K,
+              const std::vector<std::array<std::int32_t, 3>>& block_cols) {
+  const int npe = mesh.nodes_per_element;
+  energy = 0.0;
+  f.setZero();
+  double* kv = K ? K->valuePtr() : nullptr;
+  if (K) std::fill(kv, kv + K->nonZeros(), 0.0);
+  SolidPoint sp;
+  Eigen::Matrix<double, 6, 30> B;
+  Eigen::Matrix<double, 6, 30> DB;
+  for (std::size_t e = 0; e < mesh.elements.size(); ++e) {
+    const auto& el = mesh.elements[e];
+    const OgdenSolid& law = mesh.laws[mesh.law_of_element[e]];
+    for (const QuadPoint& q : qps[e]) {
+      Eigen::Matrix3d F = Eigen::Matrix3d::Identity();
+      for (int a = 0; a < npe; ++a) {
+        const Eigen::Vector3d ua = u.segment<3>(3 * el[a]);
+        const Eigen::RowVector3d g(q.g[a * 3], q.g[a * 3 + 1], q.g[a * 3 + 2]);
+        F += ua * g;
+      }
+      if (!evaluate_ogden(law, F, sp, K != nullptr)) return false;
+      energy += q.w * sp.energy;
+      const Eigen::Matrix3d P = F * sp.S;
+      for (int a = 0; a < npe; ++a) {
+        const Eigen::Vector3d g(q.g[a * 3], q.g[a * 3 + 1], q.g[a * 3 + 2]);
+        f.segment<3>(3 * el[a]) += q.w * (P * g);
+      }
+      if (!K) continue;
+      for (int a = 0; a < npe; ++a) {
+        const double* g = &q.g[a * 3];
+        for (int i = 0; i < 3; ++i) {
+          const int c = 3 * a + i;
+          B(0, c) = F(i, 0) * g[0];
+          B(1, c) = F(i, 1) * g[1];
+          B(2, c) = F(i, 2) * g[2];
+          B(3, c) = F(i, 0) * g[1] + F(i, 1) * g[0];
+          B(4, c) = F(i, 1) * g[2] + F(i, 2) * g[1];
+          B(5, c) = F(i, 2) * g[0] + F(i, 0) * g[2];
+        }
+      }
+      const int nd = 3 * npe;
+      DB.leftCols(nd).noalias() = sp.D * B.leftCols(nd);
+      const std::size_t base = e * std::size_t(npe * npe);
+      for (int a = 0; a < npe; ++a) {
+        const Eigen::Vector3d ga(q.g[a * 3], q.g[a * 3 + 1], q.g[a * 3 + 2]);
+        const Eigen::Vector3d Sga = sp.S * ga;
+        for (int b = 0; b < npe; ++b) {
+          const Eigen::Vector3d gb(q.g[b * 3], q.g[b * 3 + 1], q.g[b * 3 + 2]);
+          const double geo = Sga.dot(gb);
+          const Eigen::Matrix3d k = B.middleCols<3>(3 * a).transpose() * DB.middleCols<3>(3 * b);
+          const auto& cols = block_cols[base + std::size_t(a * npe + b)];
+          for (int kc = 0; kc < 3; ++kc)
+            for (int r = 0; r < 3; ++r) kv[cols[kc] + r] += q.w * (k(r, kc) + (r == kc ? geo : 0.0));
+        }
+      }
+    }
+  }
+  return true;
+}
+
+}  // namespace
+
+NewtonReport TissueModel::solve_static(const Eigen::Vector3d& held_mm, const NewtonOptions& options) {
+  return newton(held_mm, 0.0, options);
+}
+
+NewtonReport TissueModel::step_dynamic(const Eigen::Vector3d& held_mm, double dt_s, const NewtonOptions& options) {
+  return newton(held_mm, dt_s, options);
+}
+
+NewtonReport TissueModel::newton(const Eigen::Vector3d& held_mm, double dt, const NewtonOptions& o) {
+  Impl& I = *impl_;
+  const std::size_t n = node_count();
+  const Eigen::VectorXd u0 = u_, v0 = v_;
+  // Inertia (backward Euler): c_m M (u − u0) − M v0 / dt with c_m = 1/dt² + damping/dt.
+  const double cm = dt > 0 ? 1.0 / (dt * dt) + damping_per_s / dt : 0.0;
+  Eigen::VectorXd target = u_;
+  for (std::int32_t i : fixed_) target.segment<3>(3 * i).setZero();
+  for (std::int32_t i : held_) target.segment<3>(3 * i) = held_mm;
+  auto potential = [&](const Eigen::VectorXd& u, double& phi, Eigen::VectorXd& r, Eigen::SparseMatrix<double>* K) {
+    if (!evaluate(mesh_, I.qp, u, phi, r, K, I.block_cols)) return false;
+    if (dt > 0)
+      for (std::size_t i = 0; i < n; ++i) {
+        const double m = I.mass[i];
+        for (int k = 0; k < 3; ++k) {
+          const std::size_t d = 3 * i + k;
+          const double du = u[d] - u0[d];
+          phi += 0.5 * cm * m * du * du - m * v0[d] * du / dt;
+          r[d] += cm * m * du - m * v0[d] / dt;
+        }
+      }
+    return true;
+  };
+  NewtonReport rep;
+  double phi = 0.0;
+  Eigen::VectorXd r(3 * n), rt(3 * n), du(3 * n), trial(3 * n);
+  if (!potential(u_, phi, r, &I.K)) {
+    rep.residual_N = std::numeric_limits<double>::infinity();
+    return rep;
+  }
+  for (rep.iterations = 0; rep.iterations < o.max_iterations; ++rep.iterations) {
+    // Prescribed increments of the constrained DOFs, eliminated into the right-hand side.
+    Eigen::VectorXd dc = Eigen::VectorXd::Zero(3 * n);
+    double cgap = 0.0;
+    for (std::size_t d = 0; d < 3 * n; ++d)
+      if (I.constrained[d]) {
+        dc[d] = target[d] - u_[d];
+        cgap = std::max(cgap, std::abs(dc[d]));
+      }
+    if (dt > 0)
+      for (std::size_t i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) {
+          const int d = int(3 * i + k);
+          I.K.coeffRef(d, d) += cm * I.mass[i];
+        }
+    Eigen::VectorXd rhs = -r;
+    double* kv = I.K.valuePtr();
+    const int* outer = I.K.outerIndexPtr();
+    const int* inner = I.K.innerIndexPtr();
+    for (int col = 0; col < I.K.cols(); ++col)
+      for (int p = outer[col]; p < outer[col + 1]; ++p) {
+        const int row = inner[p];
+        if (I.constrained[col] && !I.constrained[row]) rhs[row] -= kv[p] * dc[col];
+      }
+    // held-set Schur complement needs K_fc before it is zeroed: keep the coupling columns.
+    Eigen::Matrix<double, Eigen::Dynamic, 3> Kfh = Eigen::Matrix<double, Eigen::Dynamic, 3>::Zero(3 * n, 3);
+    Eigen::Matrix3d Khh = Eigen::Matrix3d::Zero();
+    std::vector<char> held_dof(3 * n, 0);
+    for (std::int32_t i : held_)
+      for (int k = 0; k < 3; ++k) held_dof[3 * i + k] = 1;
+    for (int col = 0; col < I.K.cols(); ++col) {
+      if (!held_dof[col]) continue;
+      for (int p = outer[col]; p < outer[col + 1]; ++p) {
+        const int row = inner[p];
+        if (!I.constrained[row]) Kfh(row, col % 3) += kv[p];
+        else if (held_dof[row]) Khh(row % 3, col % 3) += kv[p];
+      }
+    }
+    for (int col = 0; col < I.K.cols(); ++col)
+      for (int p = outer[col]; p < outer[col + 1]; ++p) {
+        const int row = inner[p];
+        if (I.constrained[col] || I.constrained[row]) kv[p] = row == col ? 1.0 : 0.0;
+      }
+    for (std::size_t d = 0; d < 3 * n; ++d)
+      if (I.constrained[d]) rhs[d] = dc[d];
+    double rmax = 0.0;
+    for (std::size_t d = 0; d < 3 * n; ++d)
+      if (!I.constrained[d]) rmax = std::max(rmax, std::abs(r[d]));
+    rep.residual_N = rmax;
+    Eigen::Vector3d fh = Eigen::Vector3d::Zero();
+    for (std::int32_t i : held_) fh += r.segment<3>(3 * i);
+    const double tol = std::max(o.force_tolerance_N, o.relative_tolerance * fh.norm());
+    if (!I.analysed) {
+      I.solver.analyzePattern(I.K);
+      I.analysed = true;
+    }
+    I.solver.factorize(I.K);
+    if (I.solver.info() != Eigen::Success) break;
+    if (!held_.empty()) {
+      const Eigen::Matrix<double, Eigen::Dynamic, 3> X = I.solver.solve(Eigen::MatrixXd(Kfh));
+      held_stiffness_ = Khh - Kfh.transpose() * X;
+    }
+    if (rmax <= tol && cgap <= 1e-12) {
+      rep.converged = true;
+      break;
+    }
+    du = I.solver.solve(rhs);
+    // Backtracking on the potential: halve while an element inverts or the potential rises by
+    // more than the step's first-order change says it may.
+    const double slope = r.dot(du);
+    double alpha = 1.0, phit = 0.0;
+    bool ok = false;
+    for (int ls = 0; ls < 12; ++ls, alpha *= 0.5) {
+      trial = u_ + alpha * du;
+      if (!potential(trial, phit, rt, &I.K)) continue;
+      if (slope >= 0 || phit <= phi + 1e-4 * alpha * slope || ls == 11) {
+        ok = true;
+        break;
+      }
+    }
+    if (!ok) break;
+    u_ = trial;
+    phi = phit;
+    r = rt;
+  }
+  I.f = r;
+  if (dt > 0) v_ = (u_ - u0) / dt;
+  if (!rep.converged && !std::isfinite(rep.residual_N)) {
+    u_ = u0;
+    v_ = v0;
+  }
+  return rep;
+}
+
+Eigen::Vector3d TissueModel::held_force_N() const {
+  Eigen::Vector3d s = Eigen::Vector3d::Zero();
+  for (std::int32_t i : held_) s += impl_->f.segment<3>(3 * i);
+  return s;
+}
+
+double TissueModel::strain_energy_mJ() const {
+  double W = 0.0;
+  Eigen::VectorXd f(u_.size());
+  evaluate(mesh_, impl_->qp, u_, W, f, nullptr, impl_->block_cols);
+  return W;
+}
+
+namespace {
+Eigen::Matrix3d mean_gradient(const TissueMesh& m, const std::vector<QuadPoint>& qps, const Eigen::VectorXd& u,
+                              const std::array<std::int32_t, 10>& el) {
+  Eigen::Matrix3d F = Eigen::Matrix3d::Zero();
+  double w = 0.0;
+  for (const QuadPoint& q : qps) {
+    Eigen::Matrix3d Fq = Eigen::Matrix3d::Identity();
+    for (int a = 0; a < m.nodes_per_element; ++a)
+      Fq += u.segment<3>(3 * el[a]) * Eigen::RowVector3d(q.g[a * 3], q.g[a * 3 + 1], q.g[a * 3 + 2]);
+    F += q.w * Fq;
+    w += q.w;
+  }
+  return F / w;
+}
+}  // namespace
+
+std::vector<double> TissueModel::element_max_stretch() const {
+  std::vector<double> s(element_count());
+  for (std::size_t e = 0; e < s.size(); ++e) {
+    const Eigen::Matrix3d F = mean_gradient(mesh_, impl_->qp[e], u_, mesh_.elements[e]);
+    s[e] = std::sqrt(Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d>(F.transpose() * F, Eigen::EigenvaluesOnly).eigenvalues().maxCoeff());
+  }
+  return s;
+}
+
+std::vector<double> TissueModel::element_von_mises() const {
+  std::vector<double> s(element_count(), 0.0);
+  SolidPoint sp;
+  for (std::size_t e = 0; e < s.size(); ++e) {
+    const Eigen::Matrix3d F = mean_gradient(mesh_, impl_->qp[e], u_, mesh_.elements[e]);
+    if (!evaluate_ogden(mesh_.laws[mesh_.law_of_element[e]], F, sp, false)) continue;
+    const Eigen::Matrix3d sig = F * sp.S * F.transpose() / F.determinant();
+    const Eigen::Matrix3d dev = sig - sig.trace() / 3.0 * Eigen::Matrix3d::Identity();
+    s[e] = std::sqrt(1.5 * dev.squaredNorm());
+  }
+  return s;
+}
+
+}  // namespace organsmith::physics
