@@ -12,7 +12,9 @@
 #include "physics/materials/presets.h"
 #include "pipeline/commands.h"
 #include "pipeline/case_file.h"
+#include "pipeline/organ_fe.h"
 #include "pipeline/organ_registry.h"
+#include "pipeline/terminal_progress.h"
 #include "pipeline/output_layout.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/output_scene.h"
@@ -130,9 +132,32 @@ struct HapticsFlags {
   std::string out, trajectory, mode = "mixed", report, path = "trachea_incision";
   LoopOptions loop;
   ContactOptions contact;
-  std::vector<double> xi, bands;
+  std::vector<double> xi, bands, probe_lps;
   bool offline = false;
+  std::string indent, fe_elements = "linear";
 };
+
+int run_indent(const HapticsFlags& f) {
+  const fs::path out = f.out;
+  require_out_dir(out);
+  IndentOptions o;
+  o.fe.quadratic = f.fe_elements == "quadratic";
+  if (!f.probe_lps.empty()) {
+    if (f.probe_lps.size() != 3) throw UsageError("--probe-lps takes three coordinates (LPS mm)", "e.g. --probe-lps -20,-35,-368");
+    o.fe.probe_lps_mm = Eigen::Vector3d(f.probe_lps[0], f.probe_lps[1], f.probe_lps[2]);
+  }
+  TerminalProgress progress;
+  const nlohmann::json r = haptics_indent(out, f.indent, o, progress);
+  write_text_atomic(f.report, r.dump(2) + "\n");
+  const auto& c = r["curve"];
+  std::cout << "indent " << f.indent << " (" << r["fe"]["nodes"] << " nodes, " << r["fe"]["tets"] << " tets): "
+            << c.back()[1].get<double>() * 1e3 << " mN at " << c.back()[0].get<double>() << " mm";
+  if (r.contains("solver_curve"))
+    std::cout << "; largest difference from CalculiX past 20 % of the depth "
+              << 100 * r["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>() << " %";
+  std::cout << "\nwrote " << f.report << "\n";
+  return 0;
+}
 
 /// The calibrated law of an organ region, from OUT_DIR/materials.json (the attach stage), else the
 /// built-in preset of that region.
@@ -150,6 +175,9 @@ nlohmann::json percentiles_json(const Percentiles& p) {
 }
 
 int run_haptics(HapticsFlags f) {
+  if (!f.indent.empty() && !f.trajectory.empty()) throw UsageError("give --trajectory or --indent, not both");
+  if (!f.indent.empty()) return run_indent(f);
+  if (f.trajectory.empty()) throw UsageError("give --trajectory FILE (a replay) or --indent ORGAN (the probe's curve)");
   const fs::path out = f.out;
   require_out_dir(out);
   f.loop.mode = parse_force_mode(f.mode);
@@ -298,7 +326,14 @@ std::vector<Command> haptics_commands(CLI::App& app) {
       "and their calibrated laws, mixed F = w1 G + w2 R by mode. Writes REPORT.json: path-following\n"
       "error, time in each ξ band, peak and mean forces, loop rate, compute time and jitter.");
   haptics->add_option("out_dir", h->out, "output directory of `organsmith run`")->required();
-  haptics->add_option("--trajectory", h->trajectory, "CSV with header t_s,x,y,z")->required();
+  haptics->add_option("--trajectory", h->trajectory, "CSV with header t_s,x,y,z");
+  haptics->add_option("--indent", h->indent,
+                      "instead of a replay: press the simulate stage's probe into ORGAN's real-time finite-element model\n"
+                      "quasi-statically and write its force–depth curve beside CalculiX's (simulation/ORGAN.json)");
+  haptics->add_option("--probe-lps", h->probe_lps, "--indent: probe point X,Y,Z (LPS mm), snapped to the free surface")->delimiter(',');
+  haptics->add_option("--fe-elements", h->fe_elements,
+                      "--indent: linear (the solver mesh's corner nodes, the haptic model; default) or quadratic (its 10-node tets)")
+      ->check(CLI::IsMember({"linear", "quadratic"}));
   haptics->add_option("--mode", h->mode, "guidance (w1=1), mixed (0.5/0.5, default) or reaction (w2=1)")
       ->check(CLI::IsMember({"guidance", "mixed", "reaction"}));
   haptics->add_option("--out", h->report, "report JSON")->required();

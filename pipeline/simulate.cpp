@@ -84,6 +84,9 @@ SolverInput read_solver_inp(const fs::path& path) {
     return v;
   };
   bool heading = false;
+  std::string material, hyper;
+  std::map<std::string, std::pair<std::string, std::vector<double>>> material_numbers;  // name → (kind, numbers)
+  std::map<std::string, std::string> section;  // elset → material
   while (std::getline(in, line)) {
     ++lineno;
     if (line.rfind("**", 0) == 0) {
@@ -128,6 +131,15 @@ SolverInput read_solver_inp(const fs::path& path) {
       } else if (key == "*SURFACE") {
         surface = param(line, "NAME");
         m.surfaces[surface];
+      } else if (key == "*MATERIAL") {
+        material = param(line, "NAME");
+      } else if (key == "*HYPERELASTIC") {
+        const auto words = split_commas(line);
+        hyper = words.size() > 1 ? upper(trim(words[1])) : "";
+        if (hyper == "OGDEN") hyper += " " + param(line, "N");
+        material_numbers[material] = {hyper, {}};
+      } else if (key == "*SOLID SECTION") {
+        section[param(line, "ELSET")] = param(line, "MATERIAL");
       }
       continue;
     }
@@ -165,6 +177,9 @@ SolverInput read_solver_inp(const fs::path& path) {
       const int f = cells[1][1] - '1';
       if (e < 0 || e >= long(m.elements.size()) || f < 0 || f > 3) throw bad("surface face out of range");
       m.surfaces[surface].push_back({std::int32_t(e), f});
+    } else if (block == "*HYPERELASTIC") {
+      for (const auto& c : cells)
+        if (!trim(c).empty()) material_numbers[material].second.push_back(number(trim(c)));
     } else if (block == "*MODEL CHANGE") {
       r.inactive_regions.push_back(cells[0]);
     } else if (block == "*BOUNDARY") {
@@ -177,6 +192,35 @@ SolverInput read_solver_inp(const fs::path& path) {
     }
   }
   if (m.nodes_lps_mm.empty() || m.elements.empty()) throw bad("no nodes or elements");
+  for (const auto& [elset, mat] : section) {
+    const auto it = material_numbers.find(mat);
+    if (it == material_numbers.end()) continue;
+    const auto& [kind, v] = it->second;
+    physics::OgdenSolid law;
+    auto need = [&](std::size_t k) {
+      if (v.size() < k) throw bad("material " + mat + ": *HYPERELASTIC, " + kind + " needs " + std::to_string(k) + " numbers");
+    };
+    if (kind.rfind("OGDEN ", 0) == 0) {
+      const int n = std::atoi(kind.substr(6).c_str());
+      if (n < 1 || n > 6) throw bad("material " + mat + ": OGDEN N must be 1 to 6");
+      need(std::size_t(3 * n));
+      for (int k = 0; k < n; ++k) law.mu.push_back(v[2 * k]), law.alpha.push_back(v[2 * k + 1]);
+      law.bulk = v[2 * n] > 0 ? 2.0 / v[2 * n] : 0.0;
+    } else if (kind == "MOONEY-RIVLIN") {
+      need(3);
+      law.mu = {2 * v[0], 2 * v[1]};
+      law.alpha = {2.0, -2.0};
+      law.bulk = v[2] > 0 ? 2.0 / v[2] : 0.0;
+    } else if (kind == "NEO HOOKE") {
+      need(2);
+      law.mu = {2 * v[0]};
+      law.alpha = {2.0};
+      law.bulk = v[1] > 0 ? 2.0 / v[1] : 0.0;
+    } else {
+      continue;
+    }
+    r.region_laws[elset] = law;
+  }
   if (r.ras) {  // the probe comment is in the file's frame
     r.probe.point_lps_mm = lps_to_ras(r.probe.point_lps_mm);
     r.probe.direction_lps = lps_to_ras(r.probe.direction_lps);

@@ -9,6 +9,7 @@
 #include "core/errors.h"
 #include "core/progress.h"
 #include "meshing/solver_model.h"
+#include "physics/tissue/ogden_solid.h"
 
 #include <array>
 
@@ -42,6 +43,9 @@ struct SolverInput {
   std::string probe_node_set;
   SolverProbe probe;
   double probe_depth_mm = 0.0;
+  /// Each region's law as the file states it (*HYPERELASTIC OGDEN, MOONEY-RIVLIN or NEO HOOKE,
+  /// through *SOLID SECTION), as an Ogden solid in N/mm²; Mooney–Rivlin is the pair α = 2, −2.
+  std::map<std::string, physics::OgdenSolid> region_laws;
   bool indentation() const { return !probe_node_set.empty(); }
 };
 /// Reads an INP that organsmith wrote. InputError naming the file and line on anything else.

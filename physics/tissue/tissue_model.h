@@ -49,11 +49,20 @@ struct NewtonReport {
   double residual_N = 0.0;  ///< largest free residual component at the end
 };
 
+struct TissueModelOptions {
+  /// Linear tetrahedra: the volumetric energy per node (average nodal pressure, Bonet & Burton
+  /// 1998; the linear tetrahedron of real-time surgical simulation, Joldes et al. 2009):
+  /// Π_vol = Σ_n V_n K_n/2 (J_n − 1)², J_n the node's share of current over reference volume of
+  /// its elements. One pressure per element locks a nearly incompressible solid (TISSUE.md has
+  /// the figures). Ignored for quadratic tetrahedra (four points, as the solver).
+  bool nodal_volume = true;
+};
+
 class TissueModel {
  public:
   /// Throws InputError (exit 18) on an empty mesh, a node id out of range, a law index out of
   /// range or an element with non-positive volume.
-  explicit TissueModel(TissueMesh mesh);
+  explicit TissueModel(TissueMesh mesh, TissueModelOptions options = {});
   ~TissueModel();
   TissueModel(const TissueModel&) = delete;
   TissueModel& operator=(const TissueModel&) = delete;

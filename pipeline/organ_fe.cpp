@@ -1,0 +1,181 @@
+#include "pipeline/organ_fe.h"
+
+#include "core/errors.h"
+#include "pipeline/organ_registry.h"
+#include "pipeline/output_layout.h"
+#include "pipeline/simulate.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <fstream>
+
+namespace organsmith {
+
+namespace fs = std::filesystem;
+
+OrganFe organ_fe(const fs::path& out, const std::string& organ, const OrganFeOptions& o) {
+  OrganFe r;
+  r.organ = organ;
+  r.inp = OutputLayout{out}.volume(organ, "inp");
+  SolverInput in = read_solver_inp(r.inp);
+  SolverModel& m = in.model;
+  if (o.probe_lps_mm) {
+    if (!m.surfaces.count(organ + "_outer") || !m.surfaces.count(organ + "_liver_bed"))
+      throw InputError(ExitCode::unsupported_input, organ + " has no liver bed in its solver file, so no probe can be placed", r.inp,
+                       "the probe presses organs held by a liver bed (the gallbladder)");
+    m.node_sets.erase(organ + "_probe_nodes");
+    add_indentation_probe(m, o.probe_lps_mm, in.indentation() ? in.probe.diameter_mm : 5.0);
+    if (!m.probe) throw InputError(ExitCode::unsupported_input, "no free surface to place the probe on", r.inp);
+    r.probe = *m.probe;
+    r.probe->thickness_mm = m.probe->thickness_mm;
+    in.probe_node_set = organ + "_probe_nodes";
+    if (!(in.probe_depth_mm > 0)) in.probe_depth_mm = kProbeDepthFraction * m.probe->thickness_mm;
+  } else if (in.indentation()) {
+    r.probe = in.probe;
+  }
+  r.probe_depth_mm = in.probe_depth_mm;
+
+  physics::TissueMesh q;
+  q.nodes_per_element = m.quadratic ? 10 : 4;
+  q.nodes_mm = m.nodes_lps_mm;
+  q.elements = m.elements;
+  std::map<std::int32_t, std::int32_t> law_of_region;
+  for (const auto& [id, name] : m.region_names) {
+    const auto it = in.region_laws.find(name);
+    if (it == in.region_laws.end())
+      throw InputError(ExitCode::unsupported_input, "region " + name + " has no hyperelastic law in the solver file", r.inp,
+                       "re-run the mesh stage (`organsmith run`), which writes each region's law");
+    law_of_region[id] = std::int32_t(q.laws.size());
+    q.laws.push_back(it->second);
+    r.region_names.push_back(name);
+  }
+  for (std::int32_t rid : m.region_ids) q.law_of_element.push_back(law_of_region.at(rid));
+  std::vector<std::int32_t> id;
+  r.mesh = o.quadratic ? q : physics::corner_mesh(q, &id);
+  auto map_set = [&](const std::vector<std::int32_t>& s) {
+    std::vector<std::int32_t> v;
+    for (std::int32_t i : s)
+      if (o.quadratic) v.push_back(i);
+      else if (id[i] >= 0) v.push_back(id[i]);
+    return v;
+  };
+  if (!in.fixed_node_set.empty()) r.fixed_nodes = map_set(m.node_sets.at(in.fixed_node_set));
+  if (!in.probe_node_set.empty()) r.probe_nodes = map_set(m.node_sets.at(in.probe_node_set));
+  if (const auto it = m.surfaces.find(organ + "_outer"); it != m.surfaces.end())
+    for (const SolverFace& f : it->second) {
+      const auto v = m.face_nodes(f);  // normal into the element: reversed for outward
+      for (int k : {0, 2, 1}) r.surface_triangles.push_back(o.quadratic ? v[k] : id[v[k]]);
+    }
+  try {
+    for (const auto& [region, law] : region_materials(registry_of_output(out))) r.stretch_max[region] = law.stretch_max;
+  } catch (const Error&) {
+  }
+  return r;
+}
+
+namespace {
+
+std::vector<std::array<double, 2>> read_curve(const fs::path& f) {
+  std::vector<std::array<double, 2>> c;
+  std::ifstream in(f);
+  if (!in) return c;
+  try {
+    const nlohmann::json j = nlohmann::json::parse(in);
+    if (j.contains("indentation") && j["indentation"].contains("curve"))
+      for (const auto& p : j["indentation"]["curve"]) c.push_back({p[0].get<double>(), p[1].get<double>()});
+  } catch (const nlohmann::json::exception&) {
+    c.clear();
+  }
+  return c;
+}
+
+}  // namespace
+
+nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, const IndentOptions& o, Progress& progress) {
+  const OrganFe fe = organ_fe(out, organ, o.fe);
+  if (!fe.probe || fe.probe_nodes.empty())
+    throw InputError(ExitCode::unsupported_input, organ + "'s solver file has no indentation probe", fe.inp,
+                     "--indent presses organs whose load case is the probe (the gallbladder); give --probe-lps to place one");
+  const fs::path sim = OutputLayout{out}.simulation(organ, "json");
+  const std::vector<std::array<double, 2>> reference = o.fe.probe_lps_mm ? std::vector<std::array<double, 2>>{} : read_curve(sim);
+  std::vector<double> depths;
+  if (!reference.empty()) {
+    for (const auto& p : reference)
+      if (p[0] > 0) depths.push_back(p[0]);
+  } else {
+    const int n = std::max(1, int(std::ceil(fe.probe_depth_mm / o.max_step_mm - 1e-9)));
+    for (int k = 1; k <= n; ++k) depths.push_back(fe.probe_depth_mm * k / n);
+  }
+  physics::TissueModel model(fe.mesh);
+  model.set_boundary(fe.fixed_nodes, fe.probe_nodes);
+  const Eigen::Vector3d dir = fe.probe->direction_lps.normalized();
+  nlohmann::json curve = nlohmann::json::array(), cmp = nlohmann::json::array();
+  std::vector<double> solve_ms;
+  int iterations = 0;
+  double at = 0.0, worst = 0.0;
+  const double deepest = depths.empty() ? 0.0 : depths.back();
+  for (std::size_t k = 0; k < depths.size(); ++k) {
+    progress.report(double(k) / double(depths.size()), "pressing the probe");
+    progress.check_cancelled();
+    const double target = depths[k];
+    const int sub = std::max(1, int(std::ceil((target - at) / o.max_step_mm - 1e-9)));
+    for (int s = 1; s <= sub; ++s) {
+      const double d = at + (target - at) * s / sub;
+      const auto t0 = std::chrono::steady_clock::now();
+      const physics::NewtonReport rep = model.solve_static(dir * d);
+      solve_ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+      iterations += rep.iterations;
+      if (!rep.converged)
+        throw SimulationError(ExitCode::solver_failed,
+                              "the real-time model of " + organ + " did not reach equilibrium at " + std::to_string(d).substr(0, 5) +
+                                  " mm (largest residual " + std::to_string(rep.residual_N) + " N)",
+                              fe.inp);
+    }
+    at = target;
+    const double force = model.held_force_N().dot(dir);
+    curve.push_back({target, force});
+    if (!reference.empty()) {
+      double ref = 0.0;
+      for (const auto& p : reference)
+        if (std::abs(p[0] - target) < 1e-12) ref = p[1];
+      const double rel = ref != 0.0 ? (force - ref) / ref : 0.0;
+      cmp.push_back({target, ref, rel});
+      if (target >= 0.2 * deepest) worst = std::max(worst, std::abs(rel));
+    }
+  }
+  std::sort(solve_ms.begin(), solve_ms.end());
+  auto pct = [&](double p) { return solve_ms.empty() ? 0.0 : solve_ms[std::min(solve_ms.size() - 1, std::size_t(p * solve_ms.size()))]; };
+  const auto stretch = model.element_max_stretch();
+  nlohmann::json regions = nlohmann::json::object();
+  for (std::size_t L = 0; L < fe.region_names.size(); ++L) {
+    std::vector<double> s;
+    for (std::size_t e = 0; e < stretch.size(); ++e)
+      if (fe.mesh.law_of_element[e] == std::int32_t(L)) s.push_back(stretch[e]);
+    std::sort(s.begin(), s.end());
+    if (!s.empty()) regions[fe.region_names[L]] = {{"p99", s[std::min(s.size() - 1, std::size_t(0.99 * s.size()))]}, {"max", s.back()}};
+  }
+  nlohmann::json j;
+  j["organ"] = organ;
+  j["solver_input"] = fe.inp.string();
+  j["probe"] = {{"point_lps_mm", {fe.probe->point_lps_mm.x(), fe.probe->point_lps_mm.y(), fe.probe->point_lps_mm.z()}},
+                {"direction", {dir.x(), dir.y(), dir.z()}},
+                {"diameter_mm", fe.probe->diameter_mm},
+                {"held_nodes", fe.probe_nodes.size()}};
+  j["curve"] = curve;
+  if (!reference.empty()) {
+    j["solver_curve"] = {{"file", sim.string()}, {"depth_mm_force_N_relative_difference", cmp},
+                         {"largest_relative_difference_past_20pct_depth", worst}};
+  }
+  j["principal_stretch_at_deepest"] = regions;
+  j["fe"] = {{"nodes", fe.mesh.nodes_mm.size()},
+             {"tets", fe.mesh.elements.size()},
+             {"element", fe.mesh.nodes_per_element == 10 ? "10-node tetrahedron (C3D10's)" : "4-node tetrahedron (the C3D10 corners)"},
+             {"law", "the solver file's Ogden solid per region"},
+             {"static_increments", solve_ms.size()},
+             {"newton_iterations", iterations},
+             {"static_solve_ms", {{"p50", pct(0.5)}, {"p99", pct(0.99)}}}};
+  return j;
+}
+
+}  // namespace organsmith
