@@ -4,11 +4,13 @@
 #include "pipeline/organ_registry.h"
 #include "pipeline/output_layout.h"
 #include "pipeline/simulate.h"
+#include "physics/tissue/realtime_tissue.h"
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <fstream>
+#include <thread>
 
 namespace organsmith {
 
@@ -90,7 +92,76 @@ std::vector<std::array<double, 2>> read_curve(const fs::path& f) {
   return c;
 }
 
+double percentile(std::vector<double> v, double p) {
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, std::size_t(p * double(v.size())))];
+}
+
 }  // namespace
+
+nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, double depth_mm, Progress& progress) {
+  using clock = std::chrono::steady_clock;
+  model.reset();
+  physics::RealtimeOptions ro;
+  physics::RealtimeTissue rt(model, fe.fixed_nodes, fe.surface_triangles, ro);
+  const Eigen::Vector3d dir = fe.probe->direction_lps.normalized();
+  const Eigen::Vector3d p0 = fe.probe->point_lps_mm - dir * (ro.tool_radius_mm + 1.0);
+  const double speed = 5.0;  // mm/s
+  const double travel = 1.0 + ro.tool_radius_mm + depth_mm;
+  const double t_in = travel / speed, t_hold = 0.5, t_rest = 1.0;
+  const double total = 2 * t_in + t_hold + t_rest;
+  auto tool_at = [&](double t) {
+    double s = t < t_in ? speed * t : t < t_in + t_hold ? travel : std::max(0.0, travel - speed * (t - t_in - t_hold));
+    return Eigen::Vector3d(p0 + dir * s);
+  };
+  rt.set_tool(tool_at(0));
+  rt.start();
+  std::vector<double> tick_us, jitter_us;
+  tick_us.reserve(std::size_t(total * 1000) + 100);
+  jitter_us.reserve(tick_us.capacity());
+  double fmax = 0.0;
+  const auto start = clock::now();
+  auto next = start;
+  std::int64_t ticks = 0;
+  double end_s = 0.0;
+  while (true) {
+    const auto wake = clock::now();
+    jitter_us.push_back(std::chrono::duration<double, std::micro>(wake - next).count());
+    const double t = std::chrono::duration<double>(wake - start).count();
+    if (t > total) {
+      end_s = t;
+      break;
+    }
+    const Eigen::Vector3d x = tool_at(t);
+    rt.set_tool(x);
+    const Eigen::Vector3d F = rt.tool_force_N(x);
+    fmax = std::max(fmax, F.norm());
+    tick_us.push_back(std::chrono::duration<double, std::micro>(clock::now() - wake).count());
+    ++ticks;
+    if (ticks % 500 == 0) progress.report(std::min(1.0, t / total), "real-time press");
+    next += std::chrono::microseconds(1000);
+    if (next < clock::now()) next = clock::now();
+    std::this_thread::sleep_until(next);
+  }
+  rt.stop();
+  const std::vector<double> ms = rt.update_ms();
+  const Eigen::VectorXd u = rt.displacement_mm();
+  double umax = 0.0;
+  for (Eigen::Index i = 0; i + 2 < u.size(); i += 3) umax = std::max(umax, u.segment<3>(i).norm());
+  return {{"update_ms_p50", percentile(ms, 0.5)},
+          {"update_ms_p99", percentile(ms, 0.99)},
+          {"update_hz", rt.achieved_update_hz()},
+          {"updates", rt.updates()},
+          {"updates_refactorising", rt.refreshes()},
+          {"tangents_from_second_thread", rt.tangents_adopted()},
+          {"force_rate_hz", double(ticks) / end_s},
+          {"force_tick_us_p99", percentile(tick_us, 0.99)},
+          {"force_jitter_us_p99", percentile(jitter_us, 0.99)},
+          {"press", {{"speed_mm_per_s", speed}, {"depth_mm", depth_mm}, {"hold_s", t_hold}, {"rest_after_s", t_rest},
+                     {"peak_force_N", fmax}, {"largest_displacement_after_rest_mm", umax},
+                     {"rest_fraction_of_depth", umax / depth_mm}}}};
+}
 
 nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, const IndentOptions& o, Progress& progress) {
   const OrganFe fe = organ_fe(out, organ, o.fe);
@@ -168,6 +239,7 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
                          {"largest_relative_difference_past_20pct_depth", worst}};
   }
   j["principal_stretch_at_deepest"] = regions;
+  nlohmann::json rt = realtime_press(model, fe, deepest, progress);
   j["fe"] = {{"nodes", fe.mesh.nodes_mm.size()},
              {"tets", fe.mesh.elements.size()},
              {"element", fe.mesh.nodes_per_element == 10 ? "10-node tetrahedron (C3D10's)" : "4-node tetrahedron (the C3D10 corners)"},
@@ -175,6 +247,7 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
              {"static_increments", solve_ms.size()},
              {"newton_iterations", iterations},
              {"static_solve_ms", {{"p50", pct(0.5)}, {"p99", pct(0.99)}}}};
+  for (const auto& [k, v] : rt.items()) j["fe"][k] = v;
   return j;
 }
 

@@ -37,6 +37,11 @@ struct OrganFeOptions {
   std::optional<Eigen::Vector3d> probe_lps_mm;
 };
 
+/// The real-time model pressed through its own threads (RealtimeTissue at 60 Hz, a 1 kHz force
+/// loop on this thread): a tool sphere from 1 mm off the probe point along the probe's direction
+/// to `depth_mm`, held, withdrawn, one second at rest. The `fe` timing figures and the rest check.
+nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, double depth_mm, Progress& progress);
+
 /// Throws InputError naming the INP when it is missing, has no indentation probe where one is
 /// asked for, or a region has no law.
 OrganFe organ_fe(const std::filesystem::path& out_dir, const std::string& organ, const OrganFeOptions& options);

@@ -66,7 +66,7 @@ class MouseDevice final : public physics::HapticDevice {
   Eigen::Vector3d get() const noexcept { return physics::to_eigen(target_.read()); }
 
  private:
-  physics::SeqLock<physics::Vec3> target_;
+  SeqLock<physics::Vec3> target_;
 };
 
 /// A drawn organ surface that the tool dents: the deformer's vertices go into the VTK points,

@@ -1,3 +1,6 @@
+// tissue_model.cpp is long (≈740 lines) for a reason: the element kernels, the nodal-volume
+// term, Newton with its line search and the reused-tangent step share one private Impl (the
+// assembled pattern and the factor); split, they would each need that state exposed.
 #include "physics/tissue/tissue_model.h"
 
 #include "core/errors.h"
@@ -7,10 +10,16 @@
 #include <Eigen/CholmodSupport>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <set>
 #include <string>
+
+// OpenBLAS, when it is the system's BLAS, runs CHOLMOD's dense blocks on one thread: the model
+// shares the machine with the haptic loop and the display, and OpenBLAS's spinning threads took
+// 22 s of system time in a 30 s indentation run (no faster in wall time).
+extern "C" void openblas_set_num_threads(int) __attribute__((weak));
 
 namespace organsmith::physics {
 
@@ -87,8 +96,15 @@ struct TissueModel::Impl {
   Eigen::CholmodSupernodalLLT<Eigen::SparseMatrix<double>> llt;
   Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> ldlt;
   bool analysed = false, use_ldlt = false;
+  // The last factorisation: for which boundary and step, and the free rows' coupling to the held
+  // set's translation (for reusing it).
+  bool factor_valid = false;
+  std::uint64_t factor_boundary = 0;
+  double factor_dt = -1.0;
+  Eigen::MatrixXd Kfh;
   bool factorize() {
     if (!analysed) {
+      llt.cholmod().print = 0;  // a tangent past a limit point is handled below, not printed
       llt.analyzePattern(K);
       analysed = true;
     }
@@ -121,7 +137,9 @@ struct TissueModel::Impl {
   }
 };
 
-TissueModel::TissueModel(TissueMesh mesh, TissueModelOptions options) : mesh_(std::move(mesh)), impl_(std::make_unique<Impl>()) {
+TissueModel::TissueModel(TissueMesh mesh, TissueModelOptions options)
+    : mesh_(std::move(mesh)), options_(options), impl_(std::make_unique<Impl>()) {
+  if (openblas_set_num_threads) openblas_set_num_threads(1);
   Impl& I = *impl_;
   const std::size_t n = mesh_.nodes_mm.size();
   const int npe = mesh_.nodes_per_element;
@@ -254,6 +272,7 @@ void TissueModel::set_boundary(std::vector<std::int32_t> fixed, std::vector<std:
   std::set_difference(held.begin(), held.end(), fixed.begin(), fixed.end(), std::back_inserter(h));
   fixed_ = std::move(fixed);
   held_ = std::move(h);
+  ++boundary_version_;
   impl_->constrained.assign(3 * n, 0);
   for (auto* s : {&fixed_, &held_})
     for (std::int32_t i : *s)
@@ -492,10 +511,15 @@ NewtonReport TissueModel::newton(const Eigen::Vector3d& held_mm, double dt, cons
     for (std::int32_t i : held_) fh += r.segment<3>(3 * i);
     const double tol = std::max(o.force_tolerance_N, o.relative_tolerance * fh.norm());
     if (!I.factorize()) break;
+    I.factor_valid = true;
+    I.factor_boundary = boundary_version_;
+    I.factor_dt = dt;
+    I.Kfh = Kfh;
     if (!held_.empty()) {
       const Eigen::MatrixXd X = I.solve(Eigen::MatrixXd(Kfh));
       held_stiffness_ = Khh - Kfh.transpose() * X;
     }
+    if (factor_only_) break;
     if (rmax <= tol && cgap <= 1e-12) {
       rep.converged = true;
       break;
@@ -520,11 +544,147 @@ NewtonReport TissueModel::newton(const Eigen::Vector3d& held_mm, double dt, cons
     r = rt;
   }
   I.f = r;
+  if (!rep.converged && !factor_only_ && rep.iterations > 0) {
+    // The residual where the iterations left the state (the loop measured it before its step).
+    double rmax = 0.0;
+    for (std::size_t d = 0; d < 3 * n; ++d)
+      if (!I.constrained[d]) rmax = std::max(rmax, std::abs(r[d]));
+    rep.residual_N = rmax;
+  }
   if (dt > 0) v_ = (u_ - u0) / dt;
   if (!rep.converged && !std::isfinite(rep.residual_N)) {
     u_ = u0;
     v_ = v0;
   }
+  return rep;
+}
+
+double TissueModel::refresh_tangent(double dt) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const Eigen::VectorXd u = u_, v = v_;
+  factor_only_ = true;
+  newton(Eigen::Vector3d::Zero(), dt, NewtonOptions{});
+  factor_only_ = false;
+  u_ = u;
+  v_ = v;
+  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+void TissueModel::copy_state_from(const TissueModel& other) {
+  if (other.fixed_ != fixed_ || other.held_ != held_) set_boundary(other.fixed_, other.held_);
+  u_ = other.u_;
+  v_ = other.v_;
+}
+
+bool TissueModel::adopt_tangent(TissueModel& other) {
+  Impl& mine = *impl_;
+  const Impl& theirs = *other.impl_;
+  if (!theirs.factor_valid || theirs.factor_boundary != other.boundary_version_ || other.fixed_ != fixed_ || other.held_ != held_)
+    return false;
+  if (mine.factor_valid && mine.factor_dt != theirs.factor_dt) return false;
+  Eigen::VectorXd f = std::move(mine.f);
+  std::swap(impl_, other.impl_);
+  impl_->f = std::move(f);
+  impl_->factor_boundary = boundary_version_;
+  other.impl_->factor_valid = false;
+  std::swap(held_stiffness_, other.held_stiffness_);
+  return true;
+}
+
+NewtonReport TissueModel::step_dynamic_reusing_tangent(const Eigen::Vector3d& held_mm, double dt, const NewtonOptions& o,
+                                                       bool refresh_when_slow) {
+  Impl& I = *impl_;
+  if (!I.factor_valid || I.factor_boundary != boundary_version_ || I.factor_dt != dt) {
+    NewtonOptions one = o;
+    one.max_iterations = 1;
+    NewtonReport full = newton(held_mm, dt, one);
+    full.refreshed = true;
+    return full;
+  }
+  const std::size_t n = node_count();
+  const Eigen::VectorXd u0 = u_, v0 = v_;
+  const double cm = dt > 0 ? 1.0 / (dt * dt) + damping_per_s / dt : 0.0;
+  NewtonReport rep;
+  Eigen::VectorXd r(3 * n), rhs(3 * n);
+  double corrected = std::numeric_limits<double>::infinity();  // after the first correction (the held set moved)
+  for (rep.iterations = 0; rep.iterations <= o.max_iterations; ++rep.iterations) {
+    double phi = 0.0;
+    if (!I.evaluate(mesh_, u_, phi, r, nullptr)) {  // an element inverted: the full step below
+      rep.residual_N = std::numeric_limits<double>::infinity();
+      break;
+    }
+    if (dt > 0)
+      for (std::size_t i = 0; i < n; ++i)
+        for (int k = 0; k < 3; ++k) {
+          const std::size_t d = 3 * i + k;
+          r[d] += cm * I.mass[i] * (u_[d] - u0[d]) - I.mass[i] * v0[d] / dt;
+        }
+    I.f = r;
+    rhs = -r;
+    Eigen::Vector3d shift = Eigen::Vector3d::Zero();
+    double rmax = 0.0;
+    for (std::size_t d = 0; d < 3 * n; ++d)
+      if (!I.constrained[d]) rmax = std::max(rmax, std::abs(r[d]));
+    for (std::int32_t i : fixed_) rhs.segment<3>(3 * i) = -u_.segment<3>(3 * i);
+    for (std::int32_t i : held_) {
+      rhs.segment<3>(3 * i) = held_mm - u_.segment<3>(3 * i);
+      shift += rhs.segment<3>(3 * i) / double(held_.size());
+    }
+    Eigen::Vector3d fh = Eigen::Vector3d::Zero();
+    for (std::int32_t i : held_) fh += r.segment<3>(3 * i);
+    rep.residual_N = rmax;
+    if (rep.iterations == 0) rep.initial_residual_N = rmax;
+    if (rep.iterations == 1) corrected = rmax;
+    if (rmax <= std::max(o.force_tolerance_N, o.relative_tolerance * fh.norm()) && shift.norm() <= 1e-12) {
+      rep.converged = true;
+      break;
+    }
+    if (rep.iterations == o.max_iterations) break;
+    if (!held_.empty()) {
+      const Eigen::VectorXd c = I.Kfh * shift;
+      for (std::size_t d = 0; d < 3 * n; ++d)
+        if (!I.constrained[d]) rhs[d] -= c[d];
+    }
+    u_ += I.solve(rhs);
+  }
+  // The corrections contract (halve the residual from the first corrected state), or at least do
+  // not let it grow where another thread refreshes the tangent.
+  const double contraction = refresh_when_slow ? 0.5 : 1.0;
+  const double reference = rep.iterations >= 2 ? corrected : rep.initial_residual_N;
+  // Without the refresh here, a residual within 5 % of the tool's force is carried to the next
+  // update (which starts from it) rather than paid for with a factorisation in this one.
+  const double carried = refresh_when_slow ? 0.0 : 0.05 * held_force_N().norm();
+  if (!u_.allFinite() ||
+      (!rep.converged && !(rep.residual_N <= std::max({contraction * reference, carried, o.force_tolerance_N})))) {
+
+    // The last tangent does not contract the residual any more (the law stiffened, or the
+    // contact moved on): the step again from its start with a full Newton iteration, and more
+    // (line-searched) while the residual is not halved, so that an update never goes on from a
+    // state worse than its start.
+    u_ = u0;
+    v_ = v0;
+    NewtonOptions one = o;
+    one.max_iterations = 1;
+    NewtonReport full = newton(held_mm, dt, one);
+    // One full iteration normally ends far below where the step started; where it does not
+    // (a stiff contact just made), iterate to equilibrium rather than go on from a worse state.
+    if (!u_.allFinite() || !(full.converged || full.residual_N <= std::max({rep.initial_residual_N, 0.01 * held_force_N().norm(),
+                                                                            o.force_tolerance_N}))) {
+      u_ = u0;
+      v_ = v0;
+      NewtonOptions more = o;
+      more.max_iterations = 8;
+      full = newton(held_mm, dt, more);
+      if (!u_.allFinite()) {
+        u_ = u0;
+        v_ = v0;
+      }
+    }
+    full.initial_residual_N = rep.initial_residual_N;
+    full.refreshed = true;
+    return full;
+  }
+  if (dt > 0) v_ = (u_ - u0) / dt;
   return rep;
 }
 

@@ -5,7 +5,8 @@
 // CalculiX C3D10 node order) tetrahedra. Solved quasi-statically (Newton with an energy line
 // search) or in time (backward Euler, lumped mass, mass-proportional damping: unconditionally
 // stable for any stiffness). The sparse tangent's pattern is analysed once; each Newton step
-// assembles it in place and factorises it with Eigen's SimplicialLDLT.
+// assembles it in place and factorises it with CHOLMOD's supernodal Cholesky (LDLᵀ past a
+// limit point).
 //
 // Boundary conditions: a fixed node set (every component zero) and a "held" node set that moves
 // with one common displacement (the probe, or the tool's grip); the force on the held set is the
@@ -47,6 +48,8 @@ struct NewtonReport {
   bool converged = false;
   int iterations = 0;
   double residual_N = 0.0;  ///< largest free residual component at the end
+  double initial_residual_N = 0.0;  ///< … at the start
+  bool refreshed = false;           ///< the tangent was assembled and factorised in this call
 };
 
 struct TissueModelOptions {
@@ -81,6 +84,28 @@ class TissueModel {
   /// One backward-Euler step of `dt_s` with the held nodes at `held_mm` at its end.
   NewtonReport step_dynamic(const Eigen::Vector3d& held_mm, double dt_s, const NewtonOptions& options = {});
 
+  /// The same step for a fixed time budget: up to `options.max_iterations` corrections with the
+  /// last factorised tangent (no assembly, no factorisation: a back-substitution each), unless
+  /// there is none for this boundary and step, or those corrections do not at least halve the
+  /// residual: then the step is made again from its start with one full Newton iteration (with
+  /// its line search). The held-set stiffness is that of the last factorisation.
+  /// With `refresh_when_slow` false the step refactorises only where it has no tangent for this
+  /// boundary or its corrections made the residual grow (past 5 % of the held force): a slower
+  /// contraction is accepted, for a tangent refreshed elsewhere (adopt_tangent) to take over.
+  NewtonReport step_dynamic_reusing_tangent(const Eigen::Vector3d& held_mm, double dt_s, const NewtonOptions& options,
+                                            bool refresh_when_slow = true);
+  /// Assembles and factorises the tangent at the current state for a step of dt_s (the next
+  /// reusing steps use it). Returns its wall time, ms.
+  double refresh_tangent(double dt_s);
+  /// For a tangent refreshed on another thread: this model takes `other`'s displacement,
+  /// velocity and boundary (a model built from the same mesh and options).
+  void copy_state_from(const TissueModel& other);
+  /// Takes `other`'s last factorised tangent (and held-set stiffness) when it was made for this
+  /// model's boundary and a step of the same length; `other` gets this model's old one. False
+  /// (and nothing exchanged) otherwise.
+  bool adopt_tangent(TissueModel& other);
+  const TissueModelOptions& options() const { return options_; }
+
   /// Sum of internal forces over the held nodes at the current state (N): the force the tissue
   /// exerts on whatever holds them is its negative.
   Eigen::Vector3d held_force_N() const;
@@ -103,11 +128,14 @@ class TissueModel {
  private:
   struct Impl;
   TissueMesh mesh_;
+  TissueModelOptions options_;
   std::unique_ptr<Impl> impl_;
   std::vector<std::int32_t> fixed_, held_;
   Eigen::VectorXd u_, v_;  ///< displacement (mm), velocity (mm/s)
   Eigen::Matrix3d held_stiffness_ = Eigen::Matrix3d::Zero();
   NewtonReport newton(const Eigen::Vector3d& held_mm, double dt_s, const NewtonOptions& options);
+  std::uint64_t boundary_version_ = 0;
+  bool factor_only_ = false;  ///< newton(): assemble and factorise at the current state, move nothing
 };
 
 }  // namespace organsmith::physics
