@@ -134,7 +134,7 @@ struct HapticsFlags {
   ContactOptions contact;
   std::vector<double> xi, bands, probe_lps;
   bool offline = false;
-  std::string indent, fe_elements = "linear";
+  std::string indent, fe_elements = "quadratic";
 };
 
 int run_indent(const HapticsFlags& f) {
@@ -150,11 +150,16 @@ int run_indent(const HapticsFlags& f) {
   const nlohmann::json r = haptics_indent(out, f.indent, o, progress);
   write_text_atomic(f.report, r.dump(2) + "\n");
   const auto& c = r["curve"];
-  std::cout << "indent " << f.indent << " (" << r["fe"]["nodes"] << " nodes, " << r["fe"]["tets"] << " tets): "
+  std::cout << "indent " << f.indent << " (" << r["curve_model"]["nodes"] << " nodes, " << r["curve_model"]["tets"] << " tets): "
             << c.back()[1].get<double>() * 1e3 << " mN at " << c.back()[0].get<double>() << " mm";
   if (r.contains("solver_curve"))
     std::cout << "; largest difference from CalculiX past 20 % of the depth "
               << 100 * r["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>() << " %";
+  const auto& fe = r["fe"];
+  std::cout << "\nreal-time model (" << fe["nodes"] << " nodes): FE update p50 " << fe["update_ms_p50"].get<double>() << " ms, p99 "
+            << fe["update_ms_p99"].get<double>() << " ms; force loop " << fe["force_rate_hz"].get<double>() << " Hz, tick p99 "
+            << fe["force_tick_us_p99"].get<double>() << " us; at rest 1 s after the tool left: "
+            << 100 * fe["press"]["rest_fraction_of_depth"].get<double>() << " % of the depth";
   std::cout << "\nwrote " << f.report << "\n";
   return 0;
 }
@@ -332,7 +337,9 @@ std::vector<Command> haptics_commands(CLI::App& app) {
                       "quasi-statically and write its force–depth curve beside CalculiX's (simulation/ORGAN.json)");
   haptics->add_option("--probe-lps", h->probe_lps, "--indent: probe point X,Y,Z (LPS mm), snapped to the free surface")->delimiter(',');
   haptics->add_option("--fe-elements", h->fe_elements,
-                      "--indent: linear (the solver mesh's corner nodes, the haptic model; default) or quadratic (its 10-node tets)")
+                      "--indent: the model the quasi-static curve is pressed on: quadratic (the solver's 10-node tets; default, "
+                      "CalculiX's answer) or linear (their corner nodes, the real-time model; stiffer). The real-time press "
+                      "always runs the linear model")
       ->check(CLI::IsMember({"linear", "quadratic"}));
   haptics->add_option("--mode", h->mode, "guidance (w1=1), mixed (0.5/0.5, default) or reaction (w2=1)")
       ->check(CLI::IsMember({"guidance", "mixed", "reaction"}));

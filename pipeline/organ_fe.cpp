@@ -239,15 +239,32 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
                          {"largest_relative_difference_past_20pct_depth", worst}};
   }
   j["principal_stretch_at_deepest"] = regions;
-  nlohmann::json rt = realtime_press(model, fe, deepest, progress);
-  j["fe"] = {{"nodes", fe.mesh.nodes_mm.size()},
-             {"tets", fe.mesh.elements.size()},
-             {"element", fe.mesh.nodes_per_element == 10 ? "10-node tetrahedron (C3D10's)" : "4-node tetrahedron (the C3D10 corners)"},
-             {"law", "the solver file's Ogden solid per region"},
-             {"static_increments", solve_ms.size()},
-             {"newton_iterations", iterations},
-             {"static_solve_ms", {{"p50", pct(0.5)}, {"p99", pct(0.99)}}}};
-  for (const auto& [k, v] : rt.items()) j["fe"][k] = v;
+  auto describe = [](const OrganFe& m) {
+    return nlohmann::json{{"nodes", m.mesh.nodes_mm.size()},
+                          {"tets", m.mesh.elements.size()},
+                          {"element", m.mesh.nodes_per_element == 10 ? "10-node tetrahedron (C3D10's)" : "4-node tetrahedron (the C3D10 corners)"},
+                          {"law", "the solver file's Ogden solid per region"}};
+  };
+  j["curve_model"] = describe(fe);
+  j["curve_model"]["static_increments"] = solve_ms.size();
+  j["curve_model"]["newton_iterations"] = iterations;
+  j["curve_model"]["static_solve_ms"] = {{"p50", pct(0.5)}, {"p99", pct(0.99)}};
+  // The real-time press on the linear model (the 10-node one cannot be stepped at the display rate
+  // on two cores: TISSUE.md).
+  progress.report(1.0, "real-time press");
+  if (fe.mesh.nodes_per_element == 10) {
+    OrganFeOptions lo = o.fe;
+    lo.quadratic = false;
+    const OrganFe lin = organ_fe(out, organ, lo);
+    physics::TissueModel rmodel(lin.mesh);
+    j["fe"] = describe(lin);
+    const nlohmann::json rt = realtime_press(rmodel, lin, deepest, progress);
+    for (const auto& [k, v] : rt.items()) j["fe"][k] = v;
+  } else {
+    j["fe"] = describe(fe);
+    const nlohmann::json rt = realtime_press(model, fe, deepest, progress);
+    for (const auto& [k, v] : rt.items()) j["fe"][k] = v;
+  }
   return j;
 }
 
