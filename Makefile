@@ -61,6 +61,7 @@ bench: build
 	@echo "== cohort engines"; bash bench/pipeline/cohort_bench.sh $(BUILD_DIR) || echo "(cohort bench failed)"
 	@echo "== PACS pulls"; bash bench/pipeline/pull_bench.sh $(BUILD_DIR) || echo "(pull bench failed)"
 	@echo "== solver exports and runs"; bash bench/pipeline/solver_bench.sh $(BUILD_DIR) || echo "(solver bench failed)"
+	@echo "== real-time tissue model"; bash bench/physics/realtime_tissue.sh $(BUILD_DIR) || echo "(real-time tissue bench failed)"
 
 clean:
 	@rm -rf $(BUILD_DIR) $(BUILD_DIR).configure.log

@@ -76,11 +76,13 @@ std::vector<Command> simulate_commands(CLI::App& app) {
   auto a = std::make_shared<SimulateArgs>();
   auto* cmd = app.add_subcommand(
       "simulate",
-      "Run each organ's load case (meshes/<organ>/<organ>.inp: gallbladder — liver bed fixed, bile\n"
-      "pressure in the lumen; trachea — both cut ends fixed, airway pressure in the lumen) in CalculiX\n"
-      "(Debian package calculix-ccx) and write simulation/<organ>.vtu (displacement, von Mises stress)\n"
-      "and simulation/<organ>.json (convergence, increments, solver time, reaction balance, largest\n"
-      "displacement and stress, lumen volume change). Exit 70: no solver; 71: no converged answer.");
+      "Run each organ's load case (meshes/<organ>/<organ>.inp: gallbladder — liver bed fixed, a 5 mm\n"
+      "flat probe pressed into the free wall opposite it, the force–depth curve recorded; trachea —\n"
+      "both cut ends fixed, airway pressure in the lumen) in CalculiX (Debian package calculix-ccx)\n"
+      "and write simulation/<organ>.vtu (displacement, von Mises stress) and simulation/<organ>.json\n"
+      "(convergence, increments, solver time, reaction balance, largest displacement and stress, the\n"
+      "indentation curve or the lumen volume change). `haptics OUT_DIR --indent ORGAN` presses the\n"
+      "haptic model the same way and compares. Exit 70: no solver; 71: no converged answer.");
   cmd->add_option("OUT_DIR", a->out, "output directory of `organsmith run`")->required();
   cmd->add_option("--organ", a->organs, "organ to simulate (repeatable; default: every organ with a load case)");
   cmd->add_option("--solver", a->solver, "CalculiX executable (default: ccx on PATH, or $ORGANSMITH_CCX)");
