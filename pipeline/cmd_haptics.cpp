@@ -134,7 +134,7 @@ struct HapticsFlags {
   ContactOptions contact;
   std::vector<double> xi, bands, probe_lps;
   bool offline = false;
-  std::string indent, fe_elements = "quadratic";
+  std::string indent, fe_elements = "quadratic", fe;
 };
 
 int run_indent(const HapticsFlags& f) {
@@ -146,6 +146,7 @@ int run_indent(const HapticsFlags& f) {
     if (f.probe_lps.size() != 3) throw UsageError("--probe-lps takes three coordinates (LPS mm)", "e.g. --probe-lps -20,-35,-368");
     o.fe.probe_lps_mm = Eigen::Vector3d(f.probe_lps[0], f.probe_lps[1], f.probe_lps[2]);
   }
+  o.picture_png = fs::path(f.report).replace_extension(".png");
   TerminalProgress progress;
   const nlohmann::json r = haptics_indent(out, f.indent, o, progress);
   write_text_atomic(f.report, r.dump(2) + "\n");
@@ -220,8 +221,12 @@ int run_haptics(HapticsFlags f) {
   std::vector<StressTable> tables;
   nlohmann::json organs = nlohmann::json::array();
   const OrganRegistry registry = registry_of_output(out);
+  // The organ felt through its real-time finite-element model (default: the gallbladder where its
+  // solver file exists); the others through their surfaces and laws.
+  std::unique_ptr<RealtimeOrgan> fe = fe_for_haptics(out, f.fe, f.contact.tool_radius_mm);
+  const std::string fe_organ = fe ? fe->fe.organ : "none";
   for (const OrganInfo& o : registry.organs) {
-    if (o.haptic_surface.empty() || labels.count(o.label) == 0) continue;
+    if (o.haptic_surface.empty() || labels.count(o.label) == 0 || o.name == fe_organ) continue;
     const fs::path sf = OutputLayout{out}.surface(o.name, o.haptic_surface, "stl");
     if (!fs::exists(sf))
       throw InputError(ExitCode::input_not_found, "missing organ surface " + o.haptic_surface + ".stl", sf,
@@ -236,13 +241,21 @@ int run_haptics(HapticsFlags f) {
 
   f.loop.trace_capacity = std::size_t(device.duration_s() * f.loop.rate_Hz * 1.25) + 2000;
   HapticLoop loop(device, &path_index, contact.get(), f.loop);
+  loop.set_reaction_source(fe.get());
   if (f.offline) {
+    // The FE model updated on the loop's clock: every rate/60 ticks.
     const double dt = 1.0 / f.loop.rate_Hz;
-    for (std::int64_t i = 0; double(i) * dt <= device.duration_s(); ++i) loop.tick(double(i) * dt);
+    const std::int64_t per_update = std::max<std::int64_t>(1, std::llround(f.loop.rate_Hz / 60.0));
+    for (std::int64_t i = 0; double(i) * dt <= device.duration_s(); ++i) {
+      loop.tick(double(i) * dt);
+      if (fe && i % per_update == 0) fe->tissue->update_once();
+    }
   } else {
+    if (fe) fe->tissue->start();
     loop.start();
     loop.wait(device.duration_s() + 10.0);
     loop.stop();
+    if (fe) fe->tissue->stop();
   }
   const LoopStats st = loop.stats();
   const std::vector<TraceSample> trace = loop.trace();
@@ -286,6 +299,13 @@ int run_haptics(HapticsFlags f) {
                {"compute_us", percentiles_json(st.compute_us)},
                {"jitter_us", percentiles_json(st.jitter_us)}};
   if (f.offline) r["loop"]["ticks"] = trace.size();
+  if (fe) {
+    r["fe"] = fe->figures();
+    r["fe"]["force_rate_hz"] = st.rate_Hz;
+    r["fe"]["force_tick_us_p99"] = st.compute_us.p99;
+    r["fe"]["force_jitter_us_p99"] = st.jitter_us.p99;
+    r["contact"]["organs"].push_back({{"organ", fe_organ}, {"finite_element_model", fe->fe.inp.string()}});
+  }
   write_text_atomic(f.report, r.dump(2) + "\n");
   std::cout << "haptics (" << mode_name(f.loop.mode) << ", " << path.name << "): tool–path error RMS "
             << std::sqrt(se / n) << " mm, max " << emax << " mm (device " << std::sqrt(dse / n) << " mm); force peak "
@@ -345,6 +365,9 @@ std::vector<Command> haptics_commands(CLI::App& app) {
       ->check(CLI::IsMember({"guidance", "mixed", "reaction"}));
   haptics->add_option("--out", h->report, "report JSON")->required();
   haptics->add_option("--path", h->path, "guidance path name in OUT_DIR/paths (default trachea_incision) or a CSV/JSON file");
+  haptics->add_option("--fe", h->fe,
+                      "--trajectory: organ felt through its real-time finite-element model (meshes/<organ>/<organ>.inp); "
+                      "none: every organ through its surface and law (default: the gallbladder where its solver file exists)");
   haptics->add_option("--tool-radius-mm", h->contact.tool_radius_mm, "tool tip sphere radius, mm (default 2)")
       ->check(CLI::PositiveNumber);
   haptics->add_option("--reference-length-mm", h->contact.reference_length_mm,

@@ -13,6 +13,7 @@
 #include "pipeline/output_dir.h"
 #include "pipeline/image_io.h"
 #include "pipeline/ingest.h"
+#include "pipeline/organ_fe.h"
 #include "pipeline/output_scene.h"
 #include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
@@ -100,7 +101,7 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
 }
 
 struct PreviewFlags {
-  std::string out, size, path, mode = "mixed", screenshot;
+  std::string out, size, path, mode = "mixed", screenshot, fe;
   std::vector<double> start;
   double quit_after_s = 0;
   double rate_Hz = 1000.0;
@@ -167,8 +168,20 @@ int cmd_preview(const PreviewFlags& f) {
   std::vector<SurfaceMesh> surfaces;
   std::vector<physics::StressTable> tables;
   std::string felt;
+  // The organ felt and drawn through its real-time finite-element model (its solver file's mesh
+  // on the corner nodes, laws and fixed set): the one asked for, else the gallbladder where the
+  // mesh stage wrote it.
+  std::unique_ptr<RealtimeOrgan> fe = fe_for_haptics(out, f.fe, f.contact.tool_radius_mm);
+  const std::string fe_organ = fe ? fe->fe.organ : "none";
+  if (fe) {
+    haptics.tissue = fe->tissue.get();
+    haptics.tissue_reaction = fe.get();
+    haptics.tissue_triangles = fe->fe.surface_triangles;
+    haptics.tissue_fixed_nodes = fe->fe.fixed_nodes;
+    haptics.tissue_organ = fe_organ;
+  }
   for (const auto& organ : registry.organs) {
-    if (organ.haptic_surface.empty()) continue;
+    if (organ.haptic_surface.empty() || organ.name == fe_organ) continue;
     int best = -1;
     for (std::size_t i = 0; i < os.scene.surfaces.size(); ++i) {
       const SceneSurface& s = os.scene.surfaces[i];
@@ -192,7 +205,22 @@ int cmd_preview(const PreviewFlags& f) {
   spdlog::info("preview: haptic loop at {:.0f} Hz, mode {}; guidance path: {}; contact: {}", haptics.loop.rate_Hz,
                f.mode, chosen ? chosen->line.name : std::string("none (run `organsmith guide`)"),
                felt.empty() ? std::string("none") : felt);
+  if (fe) {
+    spdlog::info("preview: {} felt and drawn through its finite-element model ({} nodes, {} tetrahedra, {})", fe_organ,
+                 fe->fe.mesh.nodes_mm.size(), fe->fe.mesh.elements.size(), fe->fe.inp.string());
+    fe->tissue->start();
+  }
+  struct StopTissue {
+    physics::RealtimeTissue* t;
+    ~StopTissue() {
+      if (t) t->stop();
+    }
+  } stop_tissue{fe ? fe->tissue.get() : nullptr};
   run_preview(os.scene, options, haptics);
+  if (fe) {
+    fe->tissue->stop();
+    std::cout << "preview: fe " << fe->figures().dump() << std::endl;
+  }
   return 0;
 }
 
@@ -231,7 +259,9 @@ std::vector<Command> viewer_commands(CLI::App& app) {
       "preview",
       "Open the interactive preview of OUT_DIR: organs, guidance paths and a tool proxy driven by the\n"
       "mouse through the 1 kHz haptic loop (guidance force toward the path, reaction force from the\n"
-      "organs' calibrated laws; the organ surface dents under the tool). Mouse motion moves the hand in\n"
+      "organs' calibrated laws). The gallbladder (--fe) is its real-time finite-element model: drawn as\n"
+      "the model deforms under the tool, felt through its contact force; other organs dent. At the end\n"
+      "the model's figures are printed (preview: fe {...}). Mouse motion moves the hand in\n"
       "the screen plane, the wheel in depth, left drag turns the view; keys 1/2/3 switch guidance-only,\n"
       "mixed and reaction-only forces; s prints the status; q quits.");
   prev->add_option("OUT_DIR", pa->out, "output directory of `organsmith run`")->required();
@@ -242,6 +272,9 @@ std::vector<Command> viewer_commands(CLI::App& app) {
   prev->add_option("--mode", pa->mode, "starting mode: guidance, mixed (default) or reaction")
       ->check(CLI::IsMember({"guidance", "mixed", "reaction"}));
   prev->add_option("--rate", pa->rate_Hz, "haptic loop rate in Hz (default 1000)")->check(CLI::Range(10.0, 10000.0));
+  prev->add_option("--fe", pa->fe,
+                   "organ felt and drawn through its real-time finite-element model (from meshes/<organ>/<organ>.inp); "
+                   "none: every organ as a surface that dents (default: the gallbladder where its solver file exists)");
   prev->add_option("--tool-radius-mm", pa->contact.tool_radius_mm, "radius of the tool tip sphere, mm (default 2)")
       ->check(CLI::PositiveNumber);
   prev->add_option("--labels", pa->load.labels, "label map to draw when there are no meshes");

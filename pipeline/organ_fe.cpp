@@ -1,10 +1,15 @@
 #include "pipeline/organ_fe.h"
 
 #include "core/errors.h"
+#include "core/format.h"
+#include "physics/tissue/realtime_tissue.h"
 #include "pipeline/organ_registry.h"
 #include "pipeline/output_layout.h"
 #include "pipeline/simulate.h"
-#include "physics/tissue/realtime_tissue.h"
+#include "pipeline/simulation_picture.h"
+#include "viewer/display.h"
+
+#include <spdlog/spdlog.h>
 
 #include <algorithm>
 #include <chrono>
@@ -100,6 +105,43 @@ double percentile(std::vector<double> v, double p) {
 
 }  // namespace
 
+std::unique_ptr<RealtimeOrgan> realtime_organ(const fs::path& out, const std::string& organ, double tool_radius_mm) {
+  auto r = std::make_unique<RealtimeOrgan>();
+  OrganFeOptions fo;
+  fo.quadratic = false;
+  r->fe = organ_fe(out, organ, fo);
+  r->model = std::make_unique<physics::TissueModel>(r->fe.mesh);
+  physics::RealtimeOptions ro;
+  ro.tool_radius_mm = tool_radius_mm;
+  r->tissue = std::make_unique<physics::RealtimeTissue>(*r->model, r->fe.fixed_nodes, r->fe.surface_triangles, ro);
+  return r;
+}
+
+std::unique_ptr<RealtimeOrgan> fe_for_haptics(const fs::path& out, const std::string& flag, double tool_radius_mm) {
+  if (flag == "none") return nullptr;
+  if (!flag.empty()) return realtime_organ(out, flag, tool_radius_mm);
+  if (!fs::exists(OutputLayout{out}.volume("gallbladder", "inp"))) return nullptr;
+  try {
+    return realtime_organ(out, "gallbladder", tool_radius_mm);
+  } catch (const Error& e) {
+    spdlog::warn("the gallbladder is felt through its surface: no finite-element model from its solver file ({})", e.what());
+    return nullptr;
+  }
+}
+
+nlohmann::json RealtimeOrgan::figures() const {
+  const std::vector<double> ms = tissue->update_ms();
+  return {{"organ", fe.organ},
+          {"nodes", fe.mesh.nodes_mm.size()},
+          {"tets", fe.mesh.elements.size()},
+          {"update_ms_p50", percentile(ms, 0.5)},
+          {"update_ms_p99", percentile(ms, 0.99)},
+          {"update_hz", tissue->achieved_update_hz()},
+          {"updates", tissue->updates()},
+          {"updates_refactorising", tissue->refreshes()},
+          {"tangents_from_second_thread", tissue->tangents_adopted()}};
+}
+
 nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, double depth_mm, Progress& progress) {
   using clock = std::chrono::steady_clock;
   model.reset();
@@ -120,7 +162,7 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
   std::vector<double> tick_us, jitter_us;
   tick_us.reserve(std::size_t(total * 1000) + 100);
   jitter_us.reserve(tick_us.capacity());
-  double fmax = 0.0;
+  double fmax = 0.0, hold_force = 0.0;
   const auto start = clock::now();
   auto next = start;
   std::int64_t ticks = 0;
@@ -137,6 +179,7 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
     rt.set_tool(x);
     const Eigen::Vector3d F = rt.tool_force_N(x);
     fmax = std::max(fmax, F.norm());
+    if (t <= t_in + t_hold) hold_force = F.norm();  // the last one: the end of the hold
     tick_us.push_back(std::chrono::duration<double, std::micro>(clock::now() - wake).count());
     ++ticks;
     if (ticks % 500 == 0) progress.report(std::min(1.0, t / total), "real-time press");
@@ -159,7 +202,7 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
           {"force_tick_us_p99", percentile(tick_us, 0.99)},
           {"force_jitter_us_p99", percentile(jitter_us, 0.99)},
           {"press", {{"speed_mm_per_s", speed}, {"depth_mm", depth_mm}, {"hold_s", t_hold}, {"rest_after_s", t_rest},
-                     {"peak_force_N", fmax}, {"largest_displacement_after_rest_mm", umax},
+                     {"peak_force_N", fmax}, {"force_at_end_of_hold_N", hold_force}, {"largest_displacement_after_rest_mm", umax},
                      {"rest_fraction_of_depth", umax / depth_mm}}}};
 }
 
@@ -239,6 +282,23 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
                          {"largest_relative_difference_past_20pct_depth", worst}};
   }
   j["principal_stretch_at_deepest"] = regions;
+  if (!o.picture_png.empty()) {
+    // The organ at the deepest indentation, coloured by von Mises stress, over its rest outline.
+    const Eigen::VectorXd& u = model.displacement_mm();
+    std::vector<double> vm = model.element_von_mises();
+    for (double& v : vm) v *= 1e6;  // N/mm² → Pa
+    const std::string detail = format_g(fe.probe->diameter_mm, 3) + " mm probe pressed " + format_g(deepest, 3) + " mm, " +
+                               format_g(1e3 * (curve.empty() ? 0.0 : curve.back()[1].get<double>()), 3) +
+                               " mN  |  haptic model: " + std::to_string(fe.mesh.nodes_mm.size()) + " nodes, " +
+                               std::to_string(fe.mesh.elements.size()) + " tetrahedra";
+    try {
+      draw_deformed_tets(organ, fe.mesh.nodes_mm, fe.mesh.elements, std::vector<double>(u.data(), u.data() + u.size()), vm,
+                         "von Mises, Pa", detail, o.picture_png);
+      j["picture"] = o.picture_png.string();
+    } catch (const DisplayError& e) {
+      spdlog::warn("indent: no picture ({})", e.what());
+    }
+  }
   auto describe = [](const OrganFe& m) {
     return nlohmann::json{{"nodes", m.mesh.nodes_mm.size()},
                           {"tets", m.mesh.elements.size()},

@@ -7,12 +7,15 @@
 
 #include "core/progress.h"
 #include "meshing/solver_model.h"
+#include "physics/haptics/haptic_loop.h"
+#include "physics/tissue/realtime_tissue.h"
 #include "physics/tissue/tissue_model.h"
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -46,9 +49,31 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
 /// asked for, or a region has no law.
 OrganFe organ_fe(const std::filesystem::path& out_dir, const std::string& organ, const OrganFeOptions& options);
 
+/// The organ's real-time model for a haptic loop (`preview`, `haptics --trajectory`): the linear
+/// model of its solver file, its update threads (not started) and the loop's reaction source
+/// (the tool sent to the model, its contact force read back; both lock-free).
+struct RealtimeOrgan final : physics::ReactionSource {
+  OrganFe fe;
+  std::unique_ptr<physics::TissueModel> model;
+  std::unique_ptr<physics::RealtimeTissue> tissue;
+  Eigen::Vector3d reaction_N(const Eigen::Vector3d& tip) noexcept override {
+    tissue->set_tool(tip);
+    return tissue->tool_force_N(tip);
+  }
+  /// nodes, tets, update_ms_p50/p99, update_hz, updates, updates_refactorising.
+  nlohmann::json figures() const;
+};
+std::unique_ptr<RealtimeOrgan> realtime_organ(const std::filesystem::path& out_dir, const std::string& organ, double tool_radius_mm);
+/// `--fe ORGAN` of `preview` and `haptics --trajectory`: that organ's model (errors are the
+/// command's); empty (the default): the gallbladder's where the mesh stage wrote its solver file
+/// and a model can be built from it (else null, with a warning naming why); "none": null.
+std::unique_ptr<RealtimeOrgan> fe_for_haptics(const std::filesystem::path& out_dir, const std::string& fe_flag,
+                                              double tool_radius_mm);
+
 struct IndentOptions {
   OrganFeOptions fe;
   double max_step_mm = 0.15;  ///< probe travel per quasi-static increment
+  std::filesystem::path picture_png;  ///< the organ at the deepest indentation, stress-coloured (none: empty)
 };
 
 /// The indentation through the real-time model: `curve` at the simulate stage's depths (its

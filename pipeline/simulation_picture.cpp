@@ -73,6 +73,58 @@ void draw_simulation(const Simulation& sim, const std::filesystem::path& png, in
   renderer.render_to_png(scene, "simulation_" + sim.result.organ, png);
 }
 
+void draw_deformed_tets(const std::string& organ, const std::vector<Eigen::Vector3d>& X,
+                        const std::vector<std::array<std::int32_t, 10>>& elements, const std::vector<double>& u,
+                        const std::vector<double>& element_values, const std::string& value_title, const std::string& detail,
+                        const std::filesystem::path& png, int width_px, int height_px) {
+  static constexpr int kFace[4][4] = {{0, 1, 2, 3}, {0, 1, 3, 2}, {1, 2, 3, 0}, {0, 2, 3, 1}};  // three corners, the opposite one
+  std::map<std::array<std::int32_t, 3>, std::pair<int, std::array<std::int32_t, 3>>> faces;
+  std::vector<double> node_sum(X.size(), 0.0), node_n(X.size(), 0.0);
+  for (std::size_t e = 0; e < elements.size(); ++e) {
+    const auto& el = elements[e];
+    for (const auto& f : kFace) {
+      std::array<std::int32_t, 3> n{el[f[0]], el[f[1]], el[f[2]]};
+      // Outward: away from the element's fourth corner.
+      if ((X[n[1]] - X[n[0]]).cross(X[n[2]] - X[n[0]]).dot(X[el[f[3]]] - X[n[0]]) > 0) std::swap(n[1], n[2]);
+      std::array<std::int32_t, 3> key = n;
+      std::sort(key.begin(), key.end());
+      auto& slot = faces[key];
+      ++slot.first;
+      slot.second = n;
+    }
+    for (int a = 0; a < 4; ++a) node_sum[el[a]] += element_values[e], node_n[el[a]] += 1.0;
+  }
+  SceneDeformation d;
+  d.organ = organ;
+  std::map<std::int32_t, std::int32_t> vertex;
+  for (const auto& [key, f] : faces) {
+    if (f.first != 1) continue;
+    std::array<std::int32_t, 3> tri{};
+    for (int k = 0; k < 3; ++k) {
+      const std::int32_t node = f.second[std::size_t(k)];
+      auto [it, fresh] = vertex.emplace(node, std::int32_t(vertex.size()));
+      if (fresh) {
+        const Eigen::Vector3d x = X[std::size_t(node)];
+        d.undeformed.vertices_lps_mm.push_back(x);
+        d.deformed.vertices_lps_mm.push_back(x + Eigen::Vector3d(u[3 * node], u[3 * node + 1], u[3 * node + 2]));
+        d.values.push_back(node_n[node] > 0 ? node_sum[node] / node_n[node] : 0.0);
+      }
+      tri[std::size_t(k)] = it->second;
+    }
+    d.undeformed.triangles.push_back(tri);
+  }
+  d.deformed.triangles = d.undeformed.triangles;
+  d.value_title = value_title;
+  d.detail = detail;
+  SnapshotScene scene;
+  scene.deformations.push_back(std::move(d));
+  SnapshotOptions so;
+  so.width_px = width_px;
+  so.height_px = height_px;
+  SnapshotRenderer renderer(so);
+  renderer.render_to_png(scene, "simulation_" + organ, png);
+}
+
 void draw_indentation_plot(const Simulation& sim, const std::vector<std::array<double, 2>>& reference,
                            const std::string& reference_name, const std::filesystem::path& png, int width_px, int height_px) {
   const IndentationResult& ind = *sim.result.indentation;

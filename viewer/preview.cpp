@@ -29,6 +29,7 @@
 #include <vtkSphereSource.h>
 #include <vtkTextProperty.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <ctime>
@@ -134,6 +135,55 @@ struct DeformedSurface {
   }
 };
 
+/// The organ's outer surface as its real-time FE model has it: node positions copied into the
+/// VTK points each frame (the model's nodes are the points; the faces are its outer triangles),
+/// normals recomputed. Also what the status reports: where the surface moved most, and how far
+/// the fixed set moved.
+struct TissueSurface {
+  const physics::RealtimeTissue* model = nullptr;
+  Ptr<vtkPolyData> polydata;
+  std::vector<std::array<std::int32_t, 3>> tri;
+  std::vector<std::int32_t> surface_nodes, fixed;
+  std::vector<Eigen::Vector3d> x, rest;
+  std::vector<Eigen::Vector3d> nsum;
+  double max_move_mm = 0, fixed_move_mm = 0;
+  Eigen::Vector3d max_move_at = Eigen::Vector3d::Zero();
+
+  void update() {
+    model->positions(x);
+    auto* pts = static_cast<float*>(polydata->GetPoints()->GetVoidPointer(0));
+    for (std::size_t i = 0; i < x.size(); ++i)
+      for (int c = 0; c < 3; ++c) pts[3 * i + c] = float(x[i][c]);
+    if (auto* normals = vtkFloatArray::SafeDownCast(polydata->GetPointData()->GetNormals())) {
+      nsum.assign(x.size(), Eigen::Vector3d::Zero());
+      for (const auto& t : tri) {
+        const Eigen::Vector3d n = (x[t[1]] - x[t[0]]).cross(x[t[2]] - x[t[0]]);
+        for (int c = 0; c < 3; ++c) nsum[t[c]] += n;
+      }
+      float* n = normals->GetPointer(0);
+      for (std::int32_t i : surface_nodes) {
+        const double len = nsum[i].norm();
+        const Eigen::Vector3d u = len > 0 ? Eigen::Vector3d(nsum[i] / len) : Eigen::Vector3d(0, 0, 1);
+        for (int c = 0; c < 3; ++c) n[3 * i + c] = float(u[c]);
+      }
+      normals->Modified();
+    }
+    max_move_mm = 0;
+    for (std::int32_t i : surface_nodes)
+      if (const double d = (x[i] - rest[i]).norm(); d > max_move_mm) max_move_mm = d, max_move_at = x[i];
+    fixed_move_mm = 0;
+    for (std::int32_t i : fixed) fixed_move_mm = std::max(fixed_move_mm, (x[i] - rest[i]).norm());
+    polydata->GetPoints()->Modified();
+    polydata->Modified();
+  }
+  /// Distance from p to the nearest fixed node at rest.
+  double distance_to_fixed_mm(const Eigen::Vector3d& p) const {
+    double d = 1e300;
+    for (std::int32_t i : fixed) d = std::min(d, (rest[i] - p).norm());
+    return fixed.empty() ? -1.0 : d;
+  }
+};
+
 // Mode label colours: green, yellow, red-orange (none of them the cyan of the tool).
 const Rgb kModeColours[] = {{0.45, 1.0, 0.45}, {1.0, 0.85, 0.2}, {1.0, 0.45, 0.35}};
 
@@ -155,6 +205,7 @@ struct PreviewState {
   vtkPoints* bar_points = nullptr;   ///< scale bar (2D)
   vtkTextActor* bar_label = nullptr;
   std::vector<std::unique_ptr<DeformedSurface>> deformed;
+  std::unique_ptr<TissueSurface> tissue;
   double scene_size_mm = 100.0;
   Eigen::Vector3d scene_centre = Eigen::Vector3d::Zero();
   std::array<double, 6> focus{};  ///< what the camera frames (r resets to it)
@@ -224,11 +275,25 @@ struct PreviewState {
     char b[400];
     std::snprintf(b, sizeof b,
                   "status mode=%s tool_path_mm=%.3f hand_path_mm=%.3f force_N=%.4f contact=%d loop_Hz=%.0f "
-                  "tool_lps_mm=%.2f,%.2f,%.2f hand_lps_mm=%.2f,%.2f,%.2f",
+                  "tool_lps_mm=%.2f,%.2f,%.2f hand_lps_mm=%.2f,%.2f,%.2f fps=%.1f",
                   std::string(physics::mode_name(ForceMode(s.mode))).c_str(), tool_path, hand_path,
                   physics::to_eigen(s.force_N).norm(), s.contact ? 1 : 0, s.measured_rate_Hz, tool.x(), tool.y(),
-                  tool.z(), hand.x(), hand.y(), hand.z());
-    return b;
+                  tool.z(), hand.x(), hand.y(), hand.z(), fps);
+    std::string line = b;
+    if (tissue) {
+      const std::vector<double> ms = tissue->model->update_ms();
+      std::vector<double> sorted = ms;
+      std::sort(sorted.begin(), sorted.end());
+      auto pct = [&](double p) { return sorted.empty() ? 0.0 : sorted[std::min(sorted.size() - 1, std::size_t(p * sorted.size()))]; };
+      std::snprintf(b, sizeof b,
+                    " fe_nodes=%zu fe_update_hz=%.1f fe_update_ms_p50=%.2f fe_update_ms_p99=%.2f fe_moved_mm=%.3f "
+                    "fe_moved_to_tool_mm=%.2f fe_moved_to_fixed_mm=%.2f fe_fixed_moved_mm=%.4f",
+                    tissue->x.size(), tissue->model->achieved_update_hz(), pct(0.5), pct(0.99), tissue->max_move_mm,
+                    (tissue->max_move_at - tool).norm(), tissue->distance_to_fixed_mm(tissue->max_move_at),
+                    tissue->fixed_move_mm);
+      line += b;
+    }
+    return line;
   }
 
   /// Scale bar at the lower left, measured at the tool's depth (the view is a perspective one).
@@ -306,6 +371,7 @@ struct PreviewState {
       c.normal = physics::to_eigen(s.contact_normal);
       d->apply(c);
     }
+    if (tissue) tissue->update();
     update_scale_bar(tool_p);
     // Depth range around the scene and the tool, whatever the camera or the wheel did.
     vtkCamera* cam = renderer->GetActiveCamera();
@@ -322,7 +388,7 @@ struct PreviewState {
                     s.contact_surface >= 0 && std::size_t(s.contact_surface) < haptics->contact_scene_surfaces.size() &&
                             haptics->contact_scene_surfaces[s.contact_surface] >= 0
                         ? scene->surfaces[haptics->contact_scene_surfaces[s.contact_surface]].name.c_str()
-                        : "organ",
+                        : haptics->tissue ? (haptics->tissue_organ + " (finite-element model)").c_str() : "organ",
                     s.penetration_mm);
       contact_line = b;
     }
@@ -339,7 +405,7 @@ struct PreviewState {
                                    fmt_mm(haptics->path->nearest(hand_p).distance_mm))
                                       .c_str()
                                 : "no guidance path (run `organsmith guide`)",
-                  haptics->contact ? contact_line.c_str() : "no contact surfaces: no reaction force");
+                  haptics->contact || haptics->tissue ? contact_line.c_str() : "no contact surfaces: no reaction force");
     // The text is re-rasterised whenever it changes: four times a second is readable and cheap.
     const auto now = Clock::now();
     if (now >= next_corner || mode_changed) {
@@ -517,6 +583,30 @@ void run_preview(const SnapshotScene& scene, const PreviewOptions& options, cons
   for (const auto& [organ, entry] : outermost) {
     SceneSurface s = scene.surfaces[entry.second];
     s.opacity = 1.0;
+    if (haptics.tissue && organ == haptics.tissue_organ) {
+      // Drawn from the FE model: its nodes are the points, its outer faces the triangles.
+      auto ts = std::make_unique<TissueSurface>();
+      ts->model = haptics.tissue;
+      ts->model->positions(ts->rest);
+      s.mesh.vertices_lps_mm = ts->rest;
+      s.mesh.triangles.clear();
+      s.mesh.region_ids.clear();
+      s.region_colours.clear();
+      std::vector<char> on(ts->rest.size(), 0);
+      for (std::size_t t = 0; t + 2 < haptics.tissue_triangles.size(); t += 3) {
+        const std::array<std::int32_t, 3> f{haptics.tissue_triangles[t], haptics.tissue_triangles[t + 1], haptics.tissue_triangles[t + 2]};
+        s.mesh.triangles.push_back(f);
+        ts->tri.push_back(f);
+        for (std::int32_t v : f) on[v] = 1;
+      }
+      for (std::size_t i = 0; i < on.size(); ++i)
+        if (on[i]) ts->surface_nodes.push_back(std::int32_t(i));
+      ts->fixed = haptics.tissue_fixed_nodes;
+      r->AddViewProp(surface_actor(s, &ts->polydata));
+      ts->x = ts->rest;
+      state.tissue = std::move(ts);
+      continue;
+    }
     r->AddViewProp(surface_actor(s, &polydata[entry.second]));
   }
   std::array<double, 6> b{-50, 50, -50, 50, -50, 50};
@@ -666,6 +756,7 @@ void run_preview(const SnapshotScene& scene, const PreviewOptions& options, cons
 
   MouseDevice device(start);
   physics::HapticLoop loop(device, haptics.path, haptics.contact, haptics.loop);
+  loop.set_reaction_source(haptics.tissue_reaction);
   state.device = &device;
   state.loop = &loop;
   state.set_mode(haptics.loop.mode);

@@ -8,6 +8,7 @@
 #include "physics/haptics/contact.h"
 #include "physics/haptics/guidance.h"
 #include "physics/haptics/haptic_loop.h"
+#include "physics/tissue/realtime_tissue.h"
 #include "viewer/display.h"
 #include "viewer/scene.h"
 
@@ -51,6 +52,14 @@ struct PreviewHaptics {
   std::vector<int> contact_scene_surfaces;
   physics::LoopOptions loop;        ///< rate (default 1 kHz), force limit, guidance bands, start mode
   double deform_radius_mm = 8.0;    ///< falloff radius of the drawn deformation, mm (default 8)
+  /// An organ drawn from its real-time finite-element model instead (its outer surface at the
+  /// model's last update, each frame) and felt through `tissue_reaction` (added to the loop).
+  /// The caller starts and stops the model; it must outlive run_preview().
+  const physics::RealtimeTissue* tissue = nullptr;
+  physics::ReactionSource* tissue_reaction = nullptr;
+  std::vector<std::int32_t> tissue_triangles;  ///< its outer surface: node ids, three per face, outward
+  std::vector<std::int32_t> tissue_fixed_nodes;  ///< reported in the status (their largest displacement)
+  std::string tissue_organ;                      ///< the organ it is: its drawn surface is replaced
 };
 
 /// Opens the preview window on `scene`, runs the haptic loop while it is open, and returns when

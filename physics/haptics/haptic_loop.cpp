@@ -204,6 +204,14 @@ HapticState HapticLoop::tick(double t_s) noexcept {
     s.contact_point_lps_mm = to_vec3(c.point_lps_mm);
     s.contact_normal = to_vec3(c.normal);
   }
+  if (source_) {
+    const Eigen::Vector3d Rs = source_->reaction_N(q);
+    if (Rs.squaredNorm() > 0) {
+      R += Rs;
+      if (!s.contact) s.contact_surface = -1, s.contact_normal = to_vec3(Rs.normalized());
+      s.contact = true;
+    }
+  }
   const Eigen::Vector3d raw = w.guidance * G + w.reaction * R;
   if (!raw.allFinite()) faults_.fetch_add(1, std::memory_order_relaxed);
   const Eigen::Vector3d F = mix_forces(G, R, mode, options_.force_limit_N);

@@ -110,6 +110,15 @@ class ScriptedDevice final : public HapticDevice {
   std::size_t cursor_ = 0;  ///< last segment used (times are visited in order)
 };
 
+/// A reaction force computed elsewhere, e.g. an organ's real-time finite-element model
+/// (physics/tissue/realtime_tissue.h): called by the loop thread at every tick with the tool tip,
+/// so it must be lock-free and must not allocate.
+class ReactionSource {
+ public:
+  virtual ~ReactionSource() = default;
+  virtual Eigen::Vector3d reaction_N(const Eigen::Vector3d& tip_lps_mm) noexcept = 0;
+};
+
 // ---- the loop ------------------------------------------------------------------------------------
 
 struct LoopOptions {
@@ -199,6 +208,9 @@ class HapticLoop {
   /// Waits until the device finishes and the loop has stopped by itself, or timeout. True if stopped.
   bool wait(double timeout_s);
 
+  /// Adds a reaction source (summed with the contact model's force; null: none). Not while running.
+  void set_reaction_source(ReactionSource* source) noexcept { source_ = source; }
+
   /// Thread-safe, lock-free.
   void set_mode(ForceMode mode) noexcept { mode_.store(int(mode), std::memory_order_relaxed); }
   ForceMode mode() const noexcept { return ForceMode(mode_.load(std::memory_order_relaxed)); }
@@ -221,6 +233,7 @@ class HapticLoop {
   HapticDevice& device_;
   const PathIndex* path_;
   const ContactModel* contact_;
+  ReactionSource* source_ = nullptr;
   LoopOptions options_;
   std::atomic<int> mode_;
   std::atomic<bool> running_{false}, stop_requested_{false};

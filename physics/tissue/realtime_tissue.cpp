@@ -6,6 +6,8 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <pthread.h>
+#include <sched.h>
 #include <set>
 #include <utility>
 
@@ -33,6 +35,8 @@ RealtimeTissue::RealtimeTissue(TissueModel& model, std::vector<std::int32_t> fix
         if (const auto it = mid.find(std::minmax(tri_[t + k], tri_[t + (k + 1) % 3])); it != mid.end()) s.insert(it->second);
   }
   surface_nodes_.assign(s.begin(), s.end());
+  is_fixed_.assign(model_.node_count(), 0);
+  for (std::int32_t i : fixed_) is_fixed_[std::size_t(i)] = 1;
   model_.set_boundary(fixed_, {});
   shown_u_ = model_.displacement_mm();
   tool_.write({1e30, 1e30, 1e30});
@@ -41,7 +45,10 @@ RealtimeTissue::RealtimeTissue(TissueModel& model, std::vector<std::int32_t> fix
 RealtimeTissue::~RealtimeTissue() { stop(); }
 
 void RealtimeTissue::start() {
-  if (running_.exchange(true)) return;
+  if (running_.load()) return;
+  // The first tangent before the clock starts: the first update then corrects with it.
+  model_.refresh_tangent(1.0 / o_.update_hz);
+  running_.store(true);
   started_s_ = now_s();
   if (o_.background_tangent) {
     if (!twin_) twin_ = std::make_unique<TissueModel>(model_.mesh(), model_.options());
@@ -58,6 +65,10 @@ void RealtimeTissue::stop() {
 }
 
 void RealtimeTissue::refresh_loop() {
+  // Background work: on two cores the force loop and the updates must not wait for it
+  // (SCHED_IDLE needs no privilege; where it is refused the thread runs at normal priority).
+  sched_param none{};
+  pthread_setschedparam(pthread_self(), SCHED_IDLE, &none);
   const double dt = 1.0 / o_.update_hz;
   while (running_.load()) {
     {
@@ -133,7 +144,12 @@ void RealtimeTissue::update_once() {
       if (gap < 0 && std::sqrt(dmin) < o_.tool_radius_mm + o_.grip_radius_mm) {
         std::vector<std::int32_t> grip;
         for (std::int32_t i : surface_nodes_)
-          if ((at(i) - at(best)).norm() <= o_.grip_radius_mm) grip.push_back(i);
+          if (!is_fixed_[i] && (at(i) - at(best)).norm() <= o_.grip_radius_mm) grip.push_back(i);
+        if (grip.empty()) {
+          // Only fixed nodes under the tool (the liver bed, a cut end): a rigid wall there.
+          rigid_gap_ = gap;
+          rigid_normal_ = n;
+        } else {
         gripping_ = true;
         grip_normal_ = n;
         // The held nodes start where the sphere's surface is along the normal: a tool already
@@ -142,6 +158,7 @@ void RealtimeTissue::update_once() {
         grip_tool0_ = tool;
         held_ = grip_u0_;
         model_.set_boundary(fixed_, grip);
+        }
       }
     }
   }
@@ -154,6 +171,7 @@ void RealtimeTissue::update_once() {
   }
   NewtonOptions no;
   no.max_iterations = o_.corrections_per_update;
+  no.time_budget_ms = o_.correction_budget_ms;
   if (twin_) {
     std::unique_lock<std::mutex> lock(twin_mutex_, std::try_to_lock);
     if (lock.owns_lock() && twin_ready_) {
@@ -167,6 +185,15 @@ void RealtimeTissue::update_once() {
   held_ = held;
   if (rep.refreshed) ++refreshes_;
   ToolContact c;
+  if (!gripping_ && rigid_gap_ < 0) {  // the wall: k·depth along the normal, stiffness k n nᵀ
+    const Eigen::Vector3d F = o_.wall_stiffness_N_per_mm * -rigid_gap_ * rigid_normal_;
+    const Eigen::Matrix3d K = -o_.wall_stiffness_N_per_mm * rigid_normal_ * rigid_normal_.transpose();
+    c.in_contact = true;
+    c.force_on_tool_N = {F.x(), F.y(), F.z()};
+    std::copy(K.data(), K.data() + 9, c.stiffness_N_per_mm.begin());
+    c.normal = {rigid_normal_.x(), rigid_normal_.y(), rigid_normal_.z()};
+  }
+  rigid_gap_ = 0.0;
   c.update = updates_.load() + 1;
   const Eigen::Vector3d solved_for = gripping_ ? Eigen::Vector3d(grip_tool0_ + held - grip_u0_) : tool;
   c.tool_mm = {solved_for.x(), solved_for.y(), solved_for.z()};

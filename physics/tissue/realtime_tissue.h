@@ -8,7 +8,8 @@
 // nodes within the grip radius of the touched node are held to the tool (as the simulate stage's
 // bonded probe) and follow its motion from there; they let go when the tissue would pull the
 // tool (the tool withdrawn). The held nodes are where the tool is, so the tool never passes
-// through the surface.
+// through the surface. Where the touched nodes are all fixed (the liver bed, a cut end) the
+// tissue cannot give way: the tool meets a stiff wall there instead.
 //
 // Tangent: each update does a fixed number of corrections with the last factorised tangent (a
 // back-substitution each). A second thread keeps refactorising the tangent at the latest state on
@@ -37,9 +38,11 @@ namespace organsmith::physics {
 
 struct RealtimeOptions {
   double update_hz = 60.0;         ///< FE updates per second (the step is 1/update_hz)
-  int corrections_per_update = 2;  ///< back-substitutions with the last tangent per update
+  int corrections_per_update = 8;  ///< at most this many back-substitutions with the last tangent per update …
+  double correction_budget_ms = 8.0;  ///< … and none started past this (half a 60 Hz frame)
   double tool_radius_mm = 2.0;     ///< the tool tip's sphere
   double grip_radius_mm = 2.5;     ///< surface nodes within this of the touched node follow the tool (5 mm probe)
+  double wall_stiffness_N_per_mm = 1.0;  ///< where the tool meets only fixed nodes: a wall this stiff
   double max_step_mm = 0.25;       ///< the held nodes follow the tool by at most this per update (the force loop's stiffness covers the rest)
   bool background_tangent = true;  ///< refactorise on a second thread (false: in the update, where the corrections do not halve the residual)
 };
@@ -110,6 +113,9 @@ class RealtimeTissue {
   bool gripping_ = false;
   Eigen::Vector3d grip_tool0_ = Eigen::Vector3d::Zero(), grip_u0_ = Eigen::Vector3d::Zero(), grip_normal_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d held_ = Eigen::Vector3d::Zero();  ///< where the held nodes were sent last update
+  std::vector<char> is_fixed_;
+  double rigid_gap_ = 0.0;  ///< < 0: the tool is into fixed nodes by this much (this update)
+  Eigen::Vector3d rigid_normal_ = Eigen::Vector3d::UnitZ();
   void run();
 };
 

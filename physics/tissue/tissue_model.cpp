@@ -604,27 +604,63 @@ NewtonReport TissueModel::step_dynamic_reusing_tangent(const Eigen::Vector3d& he
   const std::size_t n = node_count();
   const Eigen::VectorXd u0 = u_, v0 = v_;
   const double cm = dt > 0 ? 1.0 / (dt * dt) + damping_per_s / dt : 0.0;
-  NewtonReport rep;
-  Eigen::VectorXd r(3 * n), rhs(3 * n);
-  double corrected = std::numeric_limits<double>::infinity();  // after the first correction (the held set moved)
-  for (rep.iterations = 0; rep.iterations <= o.max_iterations; ++rep.iterations) {
+  const auto t0 = std::chrono::steady_clock::now();
+  auto over_budget = [&] {
+    return o.time_budget_ms > 0 &&
+           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() > o.time_budget_ms;
+  };
+  auto residual_at = [&](Eigen::VectorXd& r, double& rmax) {
     double phi = 0.0;
-    if (!I.evaluate(mesh_, u_, phi, r, nullptr)) {  // an element inverted: the full step below
-      rep.residual_N = std::numeric_limits<double>::infinity();
-      break;
-    }
+    rmax = std::numeric_limits<double>::infinity();
+    if (!I.evaluate(mesh_, u_, phi, r, nullptr)) return false;  // an element inverted
     if (dt > 0)
       for (std::size_t i = 0; i < n; ++i)
         for (int k = 0; k < 3; ++k) {
           const std::size_t d = 3 * i + k;
           r[d] += cm * I.mass[i] * (u_[d] - u0[d]) - I.mass[i] * v0[d] / dt;
         }
+    rmax = 0.0;
+    for (std::size_t d = 0; d < 3 * n; ++d)
+      if (!I.constrained[d]) rmax = std::max(rmax, std::abs(r[d]));
+    return true;
+  };
+  NewtonReport rep;
+  Eigen::VectorXd r(3 * n), rhs(3 * n), du(3 * n), u_prev, r_prev;
+  double corrected = std::numeric_limits<double>::infinity();  // after the first correction (the held set moved)
+  double last = std::numeric_limits<double>::infinity();
+  rep.iterations = 0;
+  while (true) {
+    double rmax = 0.0;
+    const bool ok = residual_at(r, rmax);
+    // A correction that inverted an element, or (past the first, which moves the held set) made
+    // the residual grow, is halved up to three times; then the iterations stop where they were.
+    if (rep.iterations >= 1 && (!ok || (rep.iterations >= 2 && !(rmax <= last)))) {
+      int halvings = 0;
+      bool better = false;
+      while (halvings < 3 && !better) {
+        du *= 0.5;
+        u_ = u_prev + du;
+        ++halvings;
+        double rm = 0.0;
+        better = residual_at(r, rm) && (rep.iterations < 2 || rm <= last);
+        rmax = rm;
+      }
+      if (!better) {
+        u_ = u_prev;
+        r = r_prev;
+        rmax = last;
+        if (rep.iterations == 1) rmax = std::numeric_limits<double>::infinity();  // the held set could not be moved
+        rep.residual_N = rmax;
+        I.f = r;
+        break;
+      }
+    } else if (!ok) {
+      rep.residual_N = std::numeric_limits<double>::infinity();
+      break;
+    }
     I.f = r;
     rhs = -r;
     Eigen::Vector3d shift = Eigen::Vector3d::Zero();
-    double rmax = 0.0;
-    for (std::size_t d = 0; d < 3 * n; ++d)
-      if (!I.constrained[d]) rmax = std::max(rmax, std::abs(r[d]));
     for (std::int32_t i : fixed_) rhs.segment<3>(3 * i) = -u_.segment<3>(3 * i);
     for (std::int32_t i : held_) {
       rhs.segment<3>(3 * i) = held_mm - u_.segment<3>(3 * i);
@@ -639,24 +675,27 @@ NewtonReport TissueModel::step_dynamic_reusing_tangent(const Eigen::Vector3d& he
       rep.converged = true;
       break;
     }
-    if (rep.iterations == o.max_iterations) break;
+    if (rep.iterations == o.max_iterations || (rep.iterations >= 1 && over_budget())) break;
     if (!held_.empty()) {
       const Eigen::VectorXd c = I.Kfh * shift;
       for (std::size_t d = 0; d < 3 * n; ++d)
         if (!I.constrained[d]) rhs[d] -= c[d];
     }
-    u_ += I.solve(rhs);
+    du = I.solve(rhs);
+    u_prev = u_;
+    r_prev = r;
+    last = rmax;
+    u_ += du;
+    ++rep.iterations;
   }
-  // The corrections contract (halve the residual from the first corrected state), or at least do
-  // not let it grow where another thread refreshes the tangent.
-  const double contraction = refresh_when_slow ? 0.5 : 1.0;
+  // Sync mode: the corrections must halve the residual from the first corrected state, else the
+  // tangent is refreshed here. Async mode (a second thread refreshes it): the backtracked
+  // corrections never let the residual grow past the first, so whatever they reached is where the
+  // next update goes on from; only a held set that could not be moved at all is refreshed here.
   const double reference = rep.iterations >= 2 ? corrected : rep.initial_residual_N;
-  // Without the refresh here, a residual within 5 % of the tool's force is carried to the next
-  // update (which starts from it) rather than paid for with a factorisation in this one.
-  const double carried = refresh_when_slow ? 0.0 : 0.05 * held_force_N().norm();
-  if (!u_.allFinite() ||
-      (!rep.converged && !(rep.residual_N <= std::max({contraction * reference, carried, o.force_tolerance_N})))) {
-
+  const bool finite = u_.allFinite() && std::isfinite(rep.residual_N);
+  const bool accept = finite && (rep.converged || !refresh_when_slow || rep.residual_N <= std::max(0.5 * reference, o.force_tolerance_N));
+  if (!accept) {
     // The last tangent does not contract the residual any more (the law stiffened, or the
     // contact moved on): the step again from its start with a full Newton iteration, and more
     // (line-searched) while the residual is not halved, so that an update never goes on from a

@@ -42,6 +42,7 @@ struct NewtonOptions {
   int max_iterations = 25;
   double force_tolerance_N = 1e-7;   ///< largest free residual component
   double relative_tolerance = 1e-6;  ///< … or this fraction of the held set's force
+  double time_budget_ms = 0.0;       ///< step_dynamic_reusing_tangent: no new correction past this (0: none)
 };
 
 struct NewtonReport {
