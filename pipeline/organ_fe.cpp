@@ -12,10 +12,14 @@
 #include <spdlog/spdlog.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <fstream>
 #include <thread>
+
+#include <pthread.h>
+#include <sched.h>
 
 namespace organsmith {
 
@@ -162,11 +166,21 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
   std::vector<double> tick_us, jitter_us;
   tick_us.reserve(std::size_t(total * 1000) + 100);
   jitter_us.reserve(tick_us.capacity());
-  double fmax = 0.0, hold_force = 0.0;
+  double fmax = 0.0, hold_force = 0.0, hold_fe_force = 0.0, hold_lag = 0.0;
+  Eigen::Vector3d hold_held = Eigen::Vector3d::Zero();
+  std::vector<std::int32_t> hold_grip;
   const auto start = clock::now();
   auto next = start;
   std::int64_t ticks = 0;
   double end_s = 0.0;
+  // The force loop as the haptic loop runs it: its own thread, real-time priority where the
+  // system grants it (SCHED_FIFO; refused without the privilege, then normal and said so).
+  bool realtime = false;
+  std::atomic<bool> done{false};
+  std::thread force_loop([&] {
+  sched_param sp{};
+  sp.sched_priority = 20;
+  realtime = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp) == 0;
   while (true) {
     const auto wake = clock::now();
     jitter_us.push_back(std::chrono::duration<double, std::micro>(wake - next).count());
@@ -179,16 +193,40 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
     rt.set_tool(x);
     const Eigen::Vector3d F = rt.tool_force_N(x);
     fmax = std::max(fmax, F.norm());
-    if (t <= t_in + t_hold) hold_force = F.norm();  // the last one: the end of the hold
+    if (t <= t_in + t_hold) {  // the last one: the end of the hold
+      hold_force = F.norm();
+      const physics::ToolContact c = rt.contact();
+      hold_fe_force = Eigen::Vector3d(c.force_on_tool_N.data()).norm();
+      hold_lag = c.in_contact ? (x - Eigen::Vector3d(c.tool_mm.data())).norm() : -1.0;
+      hold_held = Eigen::Vector3d(c.held_mm.data());
+    }
     tick_us.push_back(std::chrono::duration<double, std::micro>(clock::now() - wake).count());
     ++ticks;
-    if (ticks % 500 == 0) progress.report(std::min(1.0, t / total), "real-time press");
     next += std::chrono::microseconds(1000);
     if (next < clock::now()) next = clock::now();
     std::this_thread::sleep_until(next);
   }
+  done.store(true);
+  });
+  while (!done.load()) {  // progress from this thread; the grip near the end of the hold
+    std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    const double t = std::chrono::duration<double>(clock::now() - start).count();
+    if (t > t_in + 0.5 * t_hold && t < t_in + t_hold) hold_grip = rt.grip_nodes();
+    progress.report(std::min(1.0, t / total), "real-time press");
+  }
+  force_loop.join();
   rt.stop();
   const std::vector<double> ms = rt.update_ms();
+  // The same grip pressed quasi-statically to where the tool held it: what the hold should feel.
+  double static_force = -1.0;
+  if (!hold_grip.empty()) {
+    physics::TissueModel ref(model.mesh(), model.options());
+    ref.set_boundary(fe.fixed_nodes, hold_grip);
+    const int steps = std::max(1, int(std::ceil(hold_held.norm() / 0.15)));
+    bool ok = true;
+    for (int k = 1; k <= steps && ok; ++k) ok = ref.solve_static(hold_held * double(k) / steps).converged;
+    if (ok) static_force = ref.held_force_N().norm();
+  }
   const Eigen::VectorXd u = rt.displacement_mm();
   double umax = 0.0;
   for (Eigen::Index i = 0; i + 2 < u.size(); i += 3) umax = std::max(umax, u.segment<3>(i).norm());
@@ -201,8 +239,11 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
           {"force_rate_hz", double(ticks) / end_s},
           {"force_tick_us_p99", percentile(tick_us, 0.99)},
           {"force_jitter_us_p99", percentile(jitter_us, 0.99)},
+          {"force_loop_realtime_priority", realtime},
           {"press", {{"speed_mm_per_s", speed}, {"depth_mm", depth_mm}, {"hold_s", t_hold}, {"rest_after_s", t_rest},
-                     {"peak_force_N", fmax}, {"force_at_end_of_hold_N", hold_force}, {"largest_displacement_after_rest_mm", umax},
+                     {"peak_force_N", fmax}, {"force_at_end_of_hold_N", hold_force}, {"tissue_force_at_end_of_hold_N", hold_fe_force},
+                     {"tissue_behind_tool_at_end_of_hold_mm", hold_lag}, {"held_nodes_at_end_of_hold", hold_grip.size()},
+                     {"static_force_same_grip_N", static_force}, {"largest_displacement_after_rest_mm", umax},
                      {"rest_fraction_of_depth", umax / depth_mm}}}};
 }
 
@@ -289,7 +330,7 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
     for (double& v : vm) v *= 1e6;  // N/mm² → Pa
     const std::string detail = format_g(fe.probe->diameter_mm, 3) + " mm probe pressed " + format_g(deepest, 3) + " mm, " +
                                format_g(1e3 * (curve.empty() ? 0.0 : curve.back()[1].get<double>()), 3) +
-                               " mN  |  haptic model: " + std::to_string(fe.mesh.nodes_mm.size()) + " nodes, " +
+                               " mN  |  organsmith's model: " + std::to_string(fe.mesh.nodes_mm.size()) + " nodes, " +
                                std::to_string(fe.mesh.elements.size()) + " tetrahedra";
     try {
       draw_deformed_tets(organ, fe.mesh.nodes_mm, fe.mesh.elements, std::vector<double>(u.data(), u.data() + u.size()), vm,

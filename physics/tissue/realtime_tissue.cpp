@@ -6,8 +6,6 @@
 #include <chrono>
 #include <cmath>
 #include <map>
-#include <pthread.h>
-#include <sched.h>
 #include <set>
 #include <utility>
 
@@ -27,12 +25,11 @@ RealtimeTissue::RealtimeTissue(TissueModel& model, std::vector<std::int32_t> fix
     // The surface's mid-side nodes join the corners: a patch held by its corners only would
     // leave the quadratic edges between them free to fold.
     static constexpr int edge[6][3] = {{0, 1, 4}, {1, 2, 5}, {2, 0, 6}, {0, 3, 7}, {1, 3, 8}, {2, 3, 9}};
-    std::map<std::pair<std::int32_t, std::int32_t>, std::int32_t> mid;
     for (const auto& el : model_.mesh().elements)
-      for (const auto& e : edge) mid[std::minmax(el[e[0]], el[e[1]])] = el[e[2]];
+      for (const auto& e : edge) mid_[std::minmax(el[e[0]], el[e[1]])] = el[e[2]];
     for (std::size_t t = 0; t + 2 < tri_.size(); t += 3)
       for (int k = 0; k < 3; ++k)
-        if (const auto it = mid.find(std::minmax(tri_[t + k], tri_[t + (k + 1) % 3])); it != mid.end()) s.insert(it->second);
+        if (const auto it = mid_.find(std::minmax(tri_[t + k], tri_[t + (k + 1) % 3])); it != mid_.end()) s.insert(it->second);
   }
   surface_nodes_.assign(s.begin(), s.end());
   is_fixed_.assign(model_.node_count(), 0);
@@ -65,10 +62,8 @@ void RealtimeTissue::stop() {
 }
 
 void RealtimeTissue::refresh_loop() {
-  // Background work: on two cores the force loop and the updates must not wait for it
-  // (SCHED_IDLE needs no privilege; where it is refused the thread runs at normal priority).
-  sched_param none{};
-  pthread_setschedparam(pthread_self(), SCHED_IDLE, &none);
+  // Normal priority: the force loop takes real-time priority where it can (HapticLoop), and a
+  // tangent starved of the CPU (SCHED_IDLE was tried) makes the updates refactorise themselves.
   const double dt = 1.0 / o_.update_hz;
   while (running_.load()) {
     {
@@ -77,6 +72,8 @@ void RealtimeTissue::refresh_loop() {
         {
           std::lock_guard<std::mutex> m(model_mutex_);
           twin_->copy_state_from(model_);
+          // A release asked for: the tangent of the tissue let go, for the update to take with it.
+          if (release_wanted_.load()) twin_->set_boundary(fixed_, {});
         }
         twin_->refresh_tangent(dt);
         twin_ready_ = true;
@@ -142,9 +139,20 @@ void RealtimeTissue::update_once() {
       n.normalize();
       const double gap = (tool - at(best)).dot(n) - o_.tool_radius_mm;
       if (gap < 0 && std::sqrt(dmin) < o_.tool_radius_mm + o_.grip_radius_mm) {
-        std::vector<std::int32_t> grip;
+        // The nodes within the grip radius, and at least the touched node's ring (its faces'
+        // nodes): on a mesh coarser than the tool a single held node would be a point load.
+        std::set<std::int32_t> g;
         for (std::int32_t i : surface_nodes_)
-          if (!is_fixed_[i] && (at(i) - at(best)).norm() <= o_.grip_radius_mm) grip.push_back(i);
+          if ((at(i) - at(best)).norm() <= o_.grip_radius_mm) g.insert(i);
+        for (std::size_t t = 0; t + 2 < tri_.size() && g.size() < 3; t += 3)
+          if (tri_[t] == best || tri_[t + 1] == best || tri_[t + 2] == best)
+            for (int k = 0; k < 3; ++k) {
+              g.insert(tri_[t + k]);
+              if (const auto it = mid_.find(std::minmax(tri_[t + k], tri_[t + (k + 1) % 3])); it != mid_.end()) g.insert(it->second);
+            }
+        std::vector<std::int32_t> grip;
+        for (std::int32_t i : g)
+          if (!is_fixed_[i]) grip.push_back(i);
         if (grip.empty()) {
           // Only fixed nodes under the tool (the liver bed, a cut end): a rigid wall there.
           rigid_gap_ = gap;
@@ -163,25 +171,39 @@ void RealtimeTissue::update_once() {
     }
   }
   Eigen::Vector3d held = Eigen::Vector3d::Zero();
+  double lag = 0.0;  // how far the held nodes are behind the tool after this update's step
   if (gripping_) {
     // Toward the tool by at most max_step_mm: a late update does not take a jump its tangent
     // cannot follow; the force loop extrapolates the force over what is left.
     const Eigen::Vector3d want = grip_u0_ + (tool - grip_tool0_) - held_;
     held = held_ + (want.norm() > o_.max_step_mm ? want * (o_.max_step_mm / want.norm()) : want);
+    lag = (want - (held - held_)).norm();
+    if (release_wanted_.load()) held = held_, lag = 0.0;  // letting go: the held nodes stand still
   }
   NewtonOptions no;
   no.max_iterations = o_.corrections_per_update;
   no.time_budget_ms = o_.correction_budget_ms;
+  no.force_tolerance_N = 1e-9;  // the organ at rest: soft walls (μ ≈ 100 Pa) move 0.05 mm under 10⁻⁷ N
   if (twin_) {
     std::unique_lock<std::mutex> lock(twin_mutex_, std::try_to_lock);
     if (lock.owns_lock() && twin_ready_) {
+      if (release_wanted_.load() && twin_->held_nodes().empty()) {  // let go, with the tangent for it
+        model_.set_boundary(fixed_, {});
+        gripping_ = false;
+        release_wanted_.store(false);
+        held = Eigen::Vector3d::Zero();
+      }
       if (model_.adopt_tangent(*twin_)) ++adopted_;
       twin_ready_ = false;
     }
   }
   // Without the second thread (not started, or switched off) this update refactorises where its
   // corrections do not halve the residual.
-  const NewtonReport rep = model_.step_dynamic_reusing_tangent(held, dt, no, !(twin_ && running_.load()));
+  // Against the clock (the second thread running) unless the tissue has fallen behind the tool
+  // by more than max_lag_mm: then this update converges whatever it costs.
+  const bool catch_up = lag > o_.max_lag_mm;
+  const NewtonReport rep = model_.step_dynamic_reusing_tangent(held, dt, no, !(twin_ && running_.load()) || catch_up);
+  if (rep.stayed) held = held_;  // not taken: the held nodes are where they were
   held_ = held;
   if (rep.refreshed) ++refreshes_;
   ToolContact c;
@@ -200,14 +222,22 @@ void RealtimeTissue::update_once() {
   if (gripping_) {
     const Eigen::Vector3d F = -model_.held_force_N();
     if (!F.allFinite() || !(F.dot(grip_normal_) > 0)) {  // the tissue would pull the tool: let go
-      gripping_ = false;
-      model_.set_boundary(fixed_, {});
+      if (twin_ && running_.load()) {
+        // Once the second thread has the tangent of the tissue let go (a few updates, the held
+        // nodes standing still meanwhile): no refactorisation in this thread.
+        release_wanted_.store(true);
+      } else {
+        gripping_ = false;
+        model_.set_boundary(fixed_, {});
+      }
     } else {
+      release_wanted_.store(false);  // pressed again before it let go
       c.in_contact = true;
       c.force_on_tool_N = {F.x(), F.y(), F.z()};
       const Eigen::Matrix3d K = -model_.held_stiffness_N_per_mm();
       std::copy(K.data(), K.data() + 9, c.stiffness_N_per_mm.begin());
       c.normal = {grip_normal_.x(), grip_normal_.y(), grip_normal_.z()};
+      c.held_mm = {held.x(), held.y(), held.z()};
     }
   }
   model_lock.unlock();
@@ -215,6 +245,7 @@ void RealtimeTissue::update_once() {
   {
     std::lock_guard<std::mutex> lock(display_mutex_);
     shown_u_ = model_.displacement_mm();
+    shown_grip_ = c.in_contact && gripping_ ? model_.held_nodes() : std::vector<std::int32_t>{};
     update_ms_.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
   }
   updates_.fetch_add(1);
@@ -230,6 +261,11 @@ void RealtimeTissue::positions(std::vector<Eigen::Vector3d>& out) const {
 Eigen::VectorXd RealtimeTissue::displacement_mm() const {
   std::lock_guard<std::mutex> lock(display_mutex_);
   return shown_u_;
+}
+
+std::vector<std::int32_t> RealtimeTissue::grip_nodes() const {
+  std::lock_guard<std::mutex> lock(display_mutex_);
+  return shown_grip_;
 }
 
 std::vector<double> RealtimeTissue::update_ms() const {

@@ -29,9 +29,11 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <thread>
+#include <utility>
 #include <vector>
 
 namespace organsmith::physics {
@@ -41,8 +43,9 @@ struct RealtimeOptions {
   int corrections_per_update = 8;  ///< at most this many back-substitutions with the last tangent per update …
   double correction_budget_ms = 8.0;  ///< … and none started past this (half a 60 Hz frame)
   double tool_radius_mm = 2.0;     ///< the tool tip's sphere
-  double grip_radius_mm = 2.5;     ///< surface nodes within this of the touched node follow the tool (5 mm probe)
+  double grip_radius_mm = 2.5;     ///< surface nodes within this of the touched node follow the tool (5 mm probe); its ring where fewer than three
   double wall_stiffness_N_per_mm = 1.0;  ///< where the tool meets only fixed nodes: a wall this stiff
+  double max_lag_mm = 0.5;         ///< … and an update whose step leaves them further behind converges fully
   double max_step_mm = 0.25;       ///< the held nodes follow the tool by at most this per update (the force loop's stiffness covers the rest)
   bool background_tangent = true;  ///< refactorise on a second thread (false: in the update, where the corrections do not halve the residual)
 };
@@ -54,6 +57,7 @@ struct ToolContact {
   std::array<double, 3> force_on_tool_N{0, 0, 0};
   std::array<double, 9> stiffness_N_per_mm{};    ///< d(force on tool)/d(tool position), column-major
   std::array<double, 3> normal{0, 0, 0};         ///< outward surface normal where the contact began
+  std::array<double, 3> held_mm{0, 0, 0};        ///< the gripped nodes' common displacement
   std::uint64_t update = 0;
 };
 
@@ -86,6 +90,7 @@ class RealtimeTissue {
   Eigen::VectorXd displacement_mm() const;
 
   std::vector<double> update_ms() const;  ///< every update's wall time so far
+  std::vector<std::int32_t> grip_nodes() const;  ///< the nodes the tool holds now (none out of contact)
   std::uint64_t updates() const { return updates_.load(); }
   double achieved_update_hz() const;
   std::uint64_t refreshes() const { return refreshes_.load(); }  ///< updates that refactorised the tangent
@@ -99,6 +104,7 @@ class RealtimeTissue {
   SeqLock<ToolContact> contact_;
   mutable std::mutex display_mutex_;
   Eigen::VectorXd shown_u_;
+  std::vector<std::int32_t> shown_grip_;
   std::vector<double> update_ms_;
   std::atomic<std::uint64_t> updates_{0}, refreshes_{0}, adopted_{0};
   std::atomic<bool> running_{false};
@@ -106,7 +112,8 @@ class RealtimeTissue {
   // The twin the second thread factorises on; model_mutex_ guards model_ against the hand-over.
   std::unique_ptr<TissueModel> twin_;
   std::mutex model_mutex_, twin_mutex_;
-  bool twin_ready_ = false;  ///< twin_ holds a factor not yet offered (under twin_mutex_)
+  bool twin_ready_ = false;
+  std::atomic<bool> release_wanted_{false};  ///< the update thread waits for the twin's released tangent  ///< twin_ holds a factor not yet offered (under twin_mutex_)
   void refresh_loop();
   double started_s_ = 0.0, stopped_s_ = 0.0;
   // Contact state (update thread only).
@@ -114,6 +121,7 @@ class RealtimeTissue {
   Eigen::Vector3d grip_tool0_ = Eigen::Vector3d::Zero(), grip_u0_ = Eigen::Vector3d::Zero(), grip_normal_ = Eigen::Vector3d::Zero();
   Eigen::Vector3d held_ = Eigen::Vector3d::Zero();  ///< where the held nodes were sent last update
   std::vector<char> is_fixed_;
+  std::map<std::pair<std::int32_t, std::int32_t>, std::int32_t> mid_;  ///< 10-node: edge → its mid-side node
   double rigid_gap_ = 0.0;  ///< < 0: the tool is into fixed nodes by this much (this update)
   Eigen::Vector3d rigid_normal_ = Eigen::Vector3d::UnitZ();
   void run();

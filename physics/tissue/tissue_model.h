@@ -51,6 +51,7 @@ struct NewtonReport {
   double residual_N = 0.0;  ///< largest free residual component at the end
   double initial_residual_N = 0.0;  ///< … at the start
   bool refreshed = false;           ///< the tangent was assembled and factorised in this call
+  bool stayed = false;              ///< the step was not taken: the state is where it started
 };
 
 struct TissueModelOptions {
@@ -135,6 +136,9 @@ class TissueModel {
   Eigen::VectorXd u_, v_;  ///< displacement (mm), velocity (mm/s)
   Eigen::Matrix3d held_stiffness_ = Eigen::Matrix3d::Zero();
   NewtonReport newton(const Eigen::Vector3d& held_mm, double dt_s, const NewtonOptions& options);
+  /// A step from the current state with new tangents: one full iteration, up to eight where one
+  /// leaves the residual above `start_residual_N` and 1 % of the held force.
+  NewtonReport full_step(const Eigen::Vector3d& held_mm, double dt_s, const NewtonOptions& options, double start_residual_N);
   std::uint64_t boundary_version_ = 0;
   bool factor_only_ = false;  ///< newton(): assemble and factorise at the current state, move nothing
 };

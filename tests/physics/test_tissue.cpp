@@ -234,11 +234,12 @@ TEST(RealtimeTissue, APressFeelsTheStaticForceAndTheBlockComesBackToRest) {
       // The tissue pushes the tool, never pulls it (the force is not monotone in the depth: so
       // soft a block rings at a few tens of Hz under a 5 mm/s tool, which the steps resolve).
       EXPECT_GE(F.z(), 0.0) << kind;
-      // The touched node stays on the sphere: it is never inside it.
+      // The touched node stays on the sphere: it is never inside it (by more than the
+      // iterations' tolerance on a held node, a hundredth of a millimetre).
       const Eigen::VectorXd u = rt.displacement_mm();
       const std::int32_t c = corner(1, 1);
       const Eigen::Vector3d x = b.mesh.nodes_mm[c] + u.segment<3>(3 * c);
-      EXPECT_GE((x - tool).norm(), o.tool_radius_mm - 1e-6) << kind << " at " << s << " mm";
+      EXPECT_GE((x - tool).norm(), o.tool_radius_mm - 1e-2) << kind << " at " << s << " mm";
     }
     for (int k = 0; k < 30; ++k) rt.update_once();  // half a second held
     F = rt.tool_force_N(tool);
