@@ -1,6 +1,6 @@
-// Over 400 lines: the mouse device, the deformed surface, the state shared by the 1 kHz loop and
-// the render timer, and the interactor style are parts of one window that VTK callbacks reach
-// through one state.
+// Over 400 lines: the mouse device, the deformed surface (dented, or the organ's FE model), the
+// state shared by the 1 kHz loop and the render timer, and the interactor style are parts of one
+// window that VTK callbacks reach through one state.
 // The interactive preview window: the mouse is a haptic device for the 1 kHz loop; the window
 // draws what the loop publishes.
 
