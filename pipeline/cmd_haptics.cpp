@@ -243,12 +243,15 @@ int run_haptics(HapticsFlags f) {
   HapticLoop loop(device, &path_index, contact.get(), f.loop);
   loop.set_reaction_source(fe.get());
   if (f.offline) {
-    // The FE model updated on the loop's clock: every rate/60 ticks.
+    // The FE model updated on the loop's clock, at its own rate (60 Hz).
     const double dt = 1.0 / f.loop.rate_Hz;
-    const std::int64_t per_update = std::max<std::int64_t>(1, std::llround(f.loop.rate_Hz / 60.0));
+    double next_update_s = 0.0;
     for (std::int64_t i = 0; double(i) * dt <= device.duration_s(); ++i) {
       loop.tick(double(i) * dt);
-      if (fe && i % per_update == 0) fe->tissue->update_once();
+      if (fe && double(i) * dt >= next_update_s - 1e-9) {
+        fe->tissue->update_once();
+        next_update_s += 1.0 / physics::RealtimeOptions{}.update_hz;
+      }
     }
   } else {
     if (fe) fe->tissue->start();
