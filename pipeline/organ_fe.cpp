@@ -334,7 +334,7 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
                                std::to_string(fe.mesh.elements.size()) + " tetrahedra";
     try {
       draw_deformed_tets(organ, fe.mesh.nodes_mm, fe.mesh.elements, std::vector<double>(u.data(), u.data() + u.size()), vm,
-                         "von Mises, Pa", detail, o.picture_png);
+                         "von Mises, Pa", detail, o.picture_png, o.picture_width_px, o.picture_height_px);
       j["picture"] = o.picture_png.string();
     } catch (const DisplayError& e) {
       spdlog::warn("indent: no picture ({})", e.what());
@@ -352,6 +352,7 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
   j["curve_model"]["static_solve_ms"] = {{"p50", pct(0.5)}, {"p99", pct(0.99)}};
   // The real-time press on the linear model (the 10-node one cannot be stepped at the display rate
   // on two cores: TISSUE.md).
+  if (!o.realtime_press) return j;
   progress.report(1.0, "real-time press");
   if (fe.mesh.nodes_per_element == 10) {
     OrganFeOptions lo = o.fe;

@@ -74,6 +74,8 @@ struct IndentOptions {
   OrganFeOptions fe;
   double max_step_mm = 0.15;  ///< probe travel per quasi-static increment
   std::filesystem::path picture_png;  ///< the organ at the deepest indentation, stress-coloured (none: empty)
+  bool realtime_press = true;         ///< also press the real-time model through its threads (the `fe` figures)
+  int picture_width_px = 1024, picture_height_px = 768;
 };
 
 /// The indentation through the real-time model: `curve` at the simulate stage's depths (its

@@ -23,6 +23,7 @@
 #include "physics/materials/presets.h"
 #include "core/format.h"
 #include "pipeline/simulate.h"
+#include "pipeline/organ_fe.h"
 #include "pipeline/simulation_picture.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/output_layout.h"
@@ -518,6 +519,18 @@ class Runner {
     for (const auto& v : case_.stages.snapshot.views) so.views.push_back(parse_view_kind(v));
     const auto written = render_snapshots(os.scene, so, OutputLayout{staging}.snapshots_dir(), progress_);
     spdlog::info("snapshot: {} views", written.size());
+    for (const auto& organ : case_.stages.snapshot.indent) {
+      // The organ under the simulate stage's probe, through organsmith's FE model of its solver file.
+      IndentOptions io;
+      io.fe.quadratic = true;
+      io.realtime_press = false;
+      io.picture_png = OutputLayout{staging}.snapshots_dir() / ("indent_" + organ + ".png");
+      io.picture_width_px = so.width_px;
+      io.picture_height_px = so.height_px;
+      const nlohmann::json r = haptics_indent(out_, organ, io, progress_);
+      spdlog::info("snapshot: indent_{}.png ({} mN at {} mm)", organ, 1e3 * r["curve"].back()[1].get<double>(),
+                   r["curve"].back()[0].get<double>());
+    }
   }
 
   /// The calibrated material of each organ region (physics presets, thesis tables), as written

@@ -96,6 +96,9 @@ void visit(Visitor& v, SnapshotStageOptions& o) {
   v.integer("width_px", o.width_px, 64, 8192, "PNG width, pixels");
   v.integer("height_px", o.height_px, 64, 8192, "PNG height, pixels");
   v.subset("views", o.views, kViews, "views to draw");
+  v.subset("indent", o.indent, {"gallbladder"},
+           "organs pressed by the simulate stage's 5 mm probe through organsmith's finite-element model and drawn "
+           "deformed, coloured by stress (snapshots/indent_<organ>.png; about 30 s each); [] = none");
 }
 
 template <typename F>

@@ -70,6 +70,9 @@ struct SnapshotStageOptions {
   int width_px = 1024;  ///< PNG width, pixels (default 1024)
   int height_px = 768;  ///< PNG height, pixels (default 768)
   std::vector<std::string> views = {"organs", "overview", "slices", "tets", "plots"};  ///< which views
+  /// Organs pressed by the simulate stage's probe through organsmith's FE model (haptics
+  /// --indent's quasi-static press) and drawn deformed: snapshots/indent_<organ>.png. [] = none.
+  std::vector<std::string> indent;
 };
 
 /// Every stage's options of a case. Segment presets stay TOML (see CaseFile).

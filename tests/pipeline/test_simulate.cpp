@@ -233,6 +233,21 @@ TEST(Simulate, IndentationCurveRisesBalancesAndStaysInRange) {
               "p99 %.3g ms, force loop %.0f Hz\n",
               h["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>(), h["fe"]["nodes"].get<int>(),
               h["fe"]["update_ms_p50"].get<double>(), h["fe"]["update_ms_p99"].get<double>(), h["fe"]["force_rate_hz"].get<double>());
+  // Its picture, and the snapshot stage's when the case asks for it (the other stages reused).
+  EXPECT_TRUE(fs::exists(tmp / "indent.png"));
+  std::ofstream(tmp / "case.toml", std::ios::app) << "[stages.snapshot]\nviews = [\"organs\"]\nwidth_px = 640\nheight_px = 480\n"
+                                                     "indent = [\"gallbladder\"]\n";
+  const auto snap = run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out));
+  ASSERT_EQ(snap.exit_code, 0) << snap.output;
+  const fs::path png = out / "snapshots" / "indent_gallbladder.png";
+  ASSERT_TRUE(fs::exists(png)) << snap.output;
+  std::ifstream pin(png, std::ios::binary);
+  unsigned char header[24] = {};
+  pin.read(reinterpret_cast<char*>(header), 24);
+  auto be32 = [&](int at) { return (header[at] << 24) | (header[at + 1] << 16) | (header[at + 2] << 8) | header[at + 3]; };
+  EXPECT_EQ(be32(16), 640);
+  EXPECT_EQ(be32(20), 480);
+  EXPECT_NE(snap.output.find("snapshot: indent_gallbladder.png"), std::string::npos) << snap.output;
 }
 
 // A scan the phantom is not: the gallbladder of a 3 mm abdominal CT (the reference mask, meshed at
