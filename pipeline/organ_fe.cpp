@@ -367,6 +367,14 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
     const nlohmann::json rt = realtime_press(model, fe, deepest, progress);
     for (const auto& [k, v] : rt.items()) j["fe"][k] = v;
   }
+  // How far the real-time press is from the solver's answer at the same depth (not the same
+  // contact: the tool grips the nodes it touches, the solver's probe is its 5 mm disc).
+  if (!reference.empty() && j["fe"].contains("press")) {
+    const double ref = reference.back()[1];
+    const double hold = j["fe"]["press"]["force_at_end_of_hold_N"].get<double>();
+    j["fe"]["press"]["calculix_probe_force_at_depth_N"] = ref;
+    j["fe"]["press"]["ratio_to_calculix_probe"] = ref > 0 ? hold / ref : 0.0;
+  }
   return j;
 }
 
