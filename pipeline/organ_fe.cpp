@@ -134,12 +134,11 @@ std::unique_ptr<RealtimeOrgan> fe_for_haptics(const fs::path& out, const std::st
 }
 
 nlohmann::json RealtimeOrgan::figures() const {
-  const std::vector<double> ms = tissue->update_ms();
   return {{"organ", fe.organ},
           {"nodes", fe.mesh.nodes_mm.size()},
           {"tets", fe.mesh.elements.size()},
-          {"update_ms_p50", percentile(ms, 0.5)},
-          {"update_ms_p99", percentile(ms, 0.99)},
+          {"update_ms_p50", tissue->update_ms_percentile(0.5)},
+          {"update_ms_p99", tissue->update_ms_percentile(0.99)},
           {"update_hz", tissue->achieved_update_hz()},
           {"updates", tissue->updates()},
           {"updates_refactorising", tissue->refreshes()},
@@ -216,7 +215,6 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
   }
   force_loop.join();
   rt.stop();
-  const std::vector<double> ms = rt.update_ms();
   // The same grip pressed quasi-statically to where the tool held it: what the hold should feel.
   double static_force = -1.0;
   if (!hold_grip.empty()) {
@@ -230,8 +228,8 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
   const Eigen::VectorXd u = rt.displacement_mm();
   double umax = 0.0;
   for (Eigen::Index i = 0; i + 2 < u.size(); i += 3) umax = std::max(umax, u.segment<3>(i).norm());
-  return {{"update_ms_p50", percentile(ms, 0.5)},
-          {"update_ms_p99", percentile(ms, 0.99)},
+  return {{"update_ms_p50", rt.update_ms_percentile(0.5)},
+          {"update_ms_p99", rt.update_ms_percentile(0.99)},
           {"update_hz", rt.achieved_update_hz()},
           {"updates", rt.updates()},
           {"updates_refactorising", rt.refreshes()},
@@ -299,8 +297,6 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
       if (target >= 0.2 * deepest) worst = std::max(worst, std::abs(rel));
     }
   }
-  std::sort(solve_ms.begin(), solve_ms.end());
-  auto pct = [&](double p) { return solve_ms.empty() ? 0.0 : solve_ms[std::min(solve_ms.size() - 1, std::size_t(p * solve_ms.size()))]; };
   const auto stretch = model.element_max_stretch();
   nlohmann::json regions = nlohmann::json::object();
   for (std::size_t L = 0; L < fe.region_names.size(); ++L) {
@@ -349,7 +345,7 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
   j["curve_model"] = describe(fe);
   j["curve_model"]["static_increments"] = solve_ms.size();
   j["curve_model"]["newton_iterations"] = iterations;
-  j["curve_model"]["static_solve_ms"] = {{"p50", pct(0.5)}, {"p99", pct(0.99)}};
+  j["curve_model"]["static_solve_ms"] = {{"p50", percentile(solve_ms, 0.5)}, {"p99", percentile(solve_ms, 0.99)}};
   // The real-time press on the linear model (the 10-node one cannot be stepped at the display rate
   // on two cores: TISSUE.md).
   if (!o.realtime_press) return j;

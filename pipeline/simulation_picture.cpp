@@ -11,41 +11,71 @@
 
 namespace organsmith {
 
+namespace {
+
+/// Corner faces of tetrahedra, keyed by their sorted nodes: how many elements share each, and its
+/// outward node order (from the last element that named it; a boundary face has one).
+class BoundaryFaces {
+ public:
+  void add(const std::array<std::int32_t, 3>& outward) {
+    std::array<std::int32_t, 3> key = outward;
+    std::sort(key.begin(), key.end());
+    auto& slot = faces_[key];
+    ++slot.first;
+    slot.second = outward;
+  }
+  /// The faces of one element only, as `d`'s two surfaces (the same triangles); `vertex(node, x,
+  /// x_deformed, value)` fills each new vertex. Then `d` is drawn into `png`.
+  template <typename Vertex>
+  void draw(SceneDeformation d, Vertex&& vertex, const std::filesystem::path& png, int width_px, int height_px) const {
+    std::map<std::int32_t, std::int32_t> index;  // node → vertex of the drawn surface
+    for (const auto& [key, f] : faces_) {
+      if (f.first != 1) continue;
+      std::array<std::int32_t, 3> tri{};
+      for (int k = 0; k < 3; ++k) {
+        const std::int32_t node = f.second[std::size_t(k)];
+        auto [it, fresh] = index.emplace(node, std::int32_t(index.size()));
+        if (fresh) {
+          Eigen::Vector3d x, xd;
+          double value = 0.0;
+          vertex(node, x, xd, value);
+          d.undeformed.vertices_lps_mm.push_back(x);
+          d.deformed.vertices_lps_mm.push_back(xd);
+          d.values.push_back(value);
+        }
+        tri[std::size_t(k)] = it->second;
+      }
+      d.undeformed.triangles.push_back(tri);
+    }
+    d.deformed.triangles = d.undeformed.triangles;
+    const std::string view = "simulation_" + d.organ;
+    SnapshotScene scene;
+    scene.deformations.push_back(std::move(d));
+    SnapshotOptions so;
+    so.width_px = width_px;
+    so.height_px = height_px;
+    SnapshotRenderer renderer(so);
+    renderer.render_to_png(scene, view, png);
+  }
+
+ private:
+  std::map<std::array<std::int32_t, 3>, std::pair<int, std::array<std::int32_t, 3>>> faces_;
+};
+
+}  // namespace
+
 void draw_simulation(const Simulation& sim, const std::filesystem::path& png, int width_px, int height_px) {
   const SolverModel& m = sim.input.model;
   // The boundary of the tetrahedra: corner faces that belong to one element only, turned so that
   // their normals point out (a face's node order points into its element).
-  std::map<std::array<std::int32_t, 3>, std::pair<int, std::array<std::int32_t, 3>>> faces;
+  BoundaryFaces faces;
   for (std::size_t e = 0; e < m.elements.size(); ++e)
     for (std::int32_t f = 0; f < 4; ++f) {
       const auto n = m.face_nodes(SolverFace{std::int32_t(e), f});
-      std::array<std::int32_t, 3> key{n[0], n[1], n[2]};
-      std::sort(key.begin(), key.end());
-      auto& slot = faces[key];
-      ++slot.first;
-      slot.second = {n[0], n[2], n[1]};
+      faces.add({n[0], n[2], n[1]});
     }
   SceneDeformation d;
   d.organ = sim.result.organ;
-  std::map<std::int32_t, std::int32_t> vertex;  // node → vertex of the drawn surface
-  for (const auto& [key, f] : faces) {
-    if (f.first != 1) continue;
-    std::array<std::int32_t, 3> tri{};
-    for (int k = 0; k < 3; ++k) {
-      const std::int32_t node = f.second[std::size_t(k)];
-      auto [it, fresh] = vertex.emplace(node, std::int32_t(vertex.size()));
-      if (fresh) {
-        const Eigen::Vector3d x = m.nodes_lps_mm[std::size_t(node)];
-        const auto& u = sim.frd.displacement_mm[std::size_t(node)];
-        d.undeformed.vertices_lps_mm.push_back(x);
-        d.deformed.vertices_lps_mm.push_back(x + Eigen::Vector3d(u[0], u[1], u[2]));
-        d.values.push_back(1e6 * von_mises(sim.frd.stress_MPa[std::size_t(node)]));
-      }
-      tri[std::size_t(k)] = it->second;
-    }
-    d.undeformed.triangles.push_back(tri);
-  }
-  d.deformed.triangles = d.undeformed.triangles;
   const SimulationResult& r = sim.result;
   d.value_title = "von Mises, Pa";
   // Set names without the organ and "_nodes": "trachea_cuts_nodes" → "cuts".
@@ -64,13 +94,15 @@ void draw_simulation(const Simulation& sim, const std::filesystem::path& png, in
     d.detail = format_g(sim.input.pressure_MPa * 1e3, 3) + " kPa in the " + bare(sim.input.pressure_surface) + ", " +
                bare(sim.input.fixed_node_set) + " fixed  |  largest displacement " + format_g(r.max_displacement_mm, 3) +
                " mm  |  " + std::to_string(r.increments) + " increments";
-  SnapshotScene scene;
-  scene.deformations.push_back(std::move(d));
-  SnapshotOptions so;
-  so.width_px = width_px;
-  so.height_px = height_px;
-  SnapshotRenderer renderer(so);
-  renderer.render_to_png(scene, "simulation_" + sim.result.organ, png);
+  faces.draw(
+      std::move(d),
+      [&](std::int32_t node, Eigen::Vector3d& x, Eigen::Vector3d& xd, double& value) {
+        x = m.nodes_lps_mm[std::size_t(node)];
+        const auto& u = sim.frd.displacement_mm[std::size_t(node)];
+        xd = x + Eigen::Vector3d(u[0], u[1], u[2]);
+        value = 1e6 * von_mises(sim.frd.stress_MPa[std::size_t(node)]);
+      },
+      png, width_px, height_px);
 }
 
 void draw_deformed_tets(const std::string& organ, const std::vector<Eigen::Vector3d>& X,
@@ -78,7 +110,7 @@ void draw_deformed_tets(const std::string& organ, const std::vector<Eigen::Vecto
                         const std::vector<double>& element_values, const std::string& value_title, const std::string& detail,
                         const std::filesystem::path& png, int width_px, int height_px) {
   static constexpr int kFace[4][4] = {{0, 1, 2, 3}, {0, 1, 3, 2}, {1, 2, 3, 0}, {0, 2, 3, 1}};  // three corners, the opposite one
-  std::map<std::array<std::int32_t, 3>, std::pair<int, std::array<std::int32_t, 3>>> faces;
+  BoundaryFaces faces;
   std::vector<double> node_sum(X.size(), 0.0), node_n(X.size(), 0.0);
   for (std::size_t e = 0; e < elements.size(); ++e) {
     const auto& el = elements[e];
@@ -86,43 +118,22 @@ void draw_deformed_tets(const std::string& organ, const std::vector<Eigen::Vecto
       std::array<std::int32_t, 3> n{el[f[0]], el[f[1]], el[f[2]]};
       // Outward: away from the element's fourth corner.
       if ((X[n[1]] - X[n[0]]).cross(X[n[2]] - X[n[0]]).dot(X[el[f[3]]] - X[n[0]]) > 0) std::swap(n[1], n[2]);
-      std::array<std::int32_t, 3> key = n;
-      std::sort(key.begin(), key.end());
-      auto& slot = faces[key];
-      ++slot.first;
-      slot.second = n;
+      faces.add(n);
     }
     for (int a = 0; a < 4; ++a) node_sum[el[a]] += element_values[e], node_n[el[a]] += 1.0;
   }
   SceneDeformation d;
   d.organ = organ;
-  std::map<std::int32_t, std::int32_t> vertex;
-  for (const auto& [key, f] : faces) {
-    if (f.first != 1) continue;
-    std::array<std::int32_t, 3> tri{};
-    for (int k = 0; k < 3; ++k) {
-      const std::int32_t node = f.second[std::size_t(k)];
-      auto [it, fresh] = vertex.emplace(node, std::int32_t(vertex.size()));
-      if (fresh) {
-        const Eigen::Vector3d x = X[std::size_t(node)];
-        d.undeformed.vertices_lps_mm.push_back(x);
-        d.deformed.vertices_lps_mm.push_back(x + Eigen::Vector3d(u[3 * node], u[3 * node + 1], u[3 * node + 2]));
-        d.values.push_back(node_n[node] > 0 ? node_sum[node] / node_n[node] : 0.0);
-      }
-      tri[std::size_t(k)] = it->second;
-    }
-    d.undeformed.triangles.push_back(tri);
-  }
-  d.deformed.triangles = d.undeformed.triangles;
   d.value_title = value_title;
   d.detail = detail;
-  SnapshotScene scene;
-  scene.deformations.push_back(std::move(d));
-  SnapshotOptions so;
-  so.width_px = width_px;
-  so.height_px = height_px;
-  SnapshotRenderer renderer(so);
-  renderer.render_to_png(scene, "simulation_" + organ, png);
+  faces.draw(
+      std::move(d),
+      [&](std::int32_t node, Eigen::Vector3d& x, Eigen::Vector3d& xd, double& value) {
+        x = X[std::size_t(node)];
+        xd = x + Eigen::Vector3d(u[3 * node], u[3 * node + 1], u[3 * node + 2]);
+        value = node_n[node] > 0 ? node_sum[node] / node_n[node] : 0.0;
+      },
+      png, width_px, height_px);
 }
 
 void draw_indentation_plot(const Simulation& sim, const std::vector<std::array<double, 2>>& reference,

@@ -281,14 +281,11 @@ struct PreviewState {
                   tool.z(), hand.x(), hand.y(), hand.z(), fps);
     std::string line = b;
     if (tissue) {
-      const std::vector<double> ms = tissue->model->update_ms();
-      std::vector<double> sorted = ms;
-      std::sort(sorted.begin(), sorted.end());
-      auto pct = [&](double p) { return sorted.empty() ? 0.0 : sorted[std::min(sorted.size() - 1, std::size_t(p * sorted.size()))]; };
       std::snprintf(b, sizeof b,
                     " fe_nodes=%zu fe_update_hz=%.1f fe_update_ms_p50=%.2f fe_update_ms_p99=%.2f fe_moved_mm=%.3f "
                     "fe_moved_to_tool_mm=%.2f fe_moved_to_fixed_mm=%.2f fe_fixed_moved_mm=%.4f",
-                    tissue->x.size(), tissue->model->achieved_update_hz(), pct(0.5), pct(0.99), tissue->max_move_mm,
+                    tissue->x.size(), tissue->model->achieved_update_hz(), tissue->model->update_ms_percentile(0.5),
+                    tissue->model->update_ms_percentile(0.99), tissue->max_move_mm,
                     (tissue->max_move_at - tool).norm(), tissue->distance_to_fixed_mm(tissue->max_move_at),
                     tissue->fixed_move_mm);
       line += b;

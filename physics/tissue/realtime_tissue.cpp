@@ -268,6 +268,13 @@ std::vector<std::int32_t> RealtimeTissue::grip_nodes() const {
   return shown_grip_;
 }
 
+double RealtimeTissue::update_ms_percentile(double p) const {
+  std::vector<double> v = update_ms();
+  if (v.empty()) return 0.0;
+  std::sort(v.begin(), v.end());
+  return v[std::min(v.size() - 1, std::size_t(p * double(v.size())))];
+}
+
 std::vector<double> RealtimeTissue::update_ms() const {
   std::lock_guard<std::mutex> lock(display_mutex_);
   return update_ms_;

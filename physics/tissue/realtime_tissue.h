@@ -90,6 +90,7 @@ class RealtimeTissue {
   Eigen::VectorXd displacement_mm() const;
 
   std::vector<double> update_ms() const;  ///< every update's wall time so far
+  double update_ms_percentile(double p) const;  ///< of update_ms(), p in [0, 1] (0 before any update)
   std::vector<std::int32_t> grip_nodes() const;  ///< the nodes the tool holds now (none out of contact)
   std::uint64_t updates() const { return updates_.load(); }
   double achieved_update_hz() const;

@@ -1,4 +1,4 @@
-// tissue_model.cpp is long (≈820 lines) for a reason: the element kernels, the nodal-volume
+// Over 400 lines (≈ 820): the element kernels, the nodal-volume
 // term, Newton with its line search and the reused-tangent step share one private Impl (the
 // assembled pattern and the factor); split, they would each need that state exposed.
 #include "physics/tissue/tissue_model.h"

@@ -113,6 +113,52 @@ std::size_t differing_pixels(const RgbImage& a, const RgbImage& b, int x0, int y
   return n;
 }
 
+/// A `preview` process on a display, its output (stdout and stderr) read line by line into `log`.
+struct PreviewProcess {
+  FILE* proc = nullptr;
+  std::string log;
+  PreviewProcess(const std::string& display, const std::string& args) {
+    const std::string cmd = "DISPLAY=" + display + " exec '" + std::string(ORGANSMITH_CLI) + "' preview " + args + " 2>&1";
+    proc = popen(cmd.c_str(), "r");
+  }
+  ~PreviewProcess() {
+    if (proc) pclose(proc);
+  }
+  /// The next line starting with `prefix` (empty at the end of the output).
+  std::string read_until(const std::string& prefix) {
+    char line[4096];
+    while (proc && fgets(line, sizeof line, proc)) {
+      log += line;
+      if (std::string(line).rfind(prefix, 0) == 0) return line;
+    }
+    return {};
+  }
+  /// Reads the rest and waits for the process: its wait status.
+  int finish() {
+    read_until("\x01");
+    const int status = pclose(proc);
+    proc = nullptr;
+    return status;
+  }
+};
+
+/// The window titled `title`, waited for up to 10 s (0 if it never appears).
+Window wait_for_window(Display* d, const std::string& title) {
+  Window w = 0;
+  for (int i = 0; i < 100 && !w; ++i) {
+    w = find_window(d, DefaultRootWindow(d), title);
+    if (!w) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  }
+  return w;
+}
+
+void press_key(const XTest& xtest, Display* d, KeySym sym) {
+  const unsigned int code = XKeysymToKeycode(d, sym);
+  xtest.key(d, code, True, 0);
+  xtest.key(d, code, False, 0);
+  XFlush(d);
+}
+
 /// Keeps a screenshot in $ORGANSMITH_KEEP_PREVIEW_SHOTS when set (to look at it).
 void keep_shot(const RgbImage& img, const std::string& name) {
   if (const char* dir = std::getenv("ORGANSMITH_KEEP_PREVIEW_SHOTS"); dir && img.width_px > 0)
@@ -154,27 +200,14 @@ TEST(Preview, MouseMovesTheToolKeysSwitchTheModeAndGuidancePullsTheTool) {
   const CliResult guide = run_cli("guide '" + out.path().string() + "' --path trachea_centerline");
   ASSERT_EQ(guide.exit_code, 0) << guide.output;
   const std::string title = "organsmith preview";
-  const std::string cmd = "DISPLAY=" + session.name() + " exec '" + std::string(ORGANSMITH_CLI) + "' preview '" +
-                          out.path().string() + "' --size 800x600 --quit-after 120 2>&1";
-  FILE* proc = popen(cmd.c_str(), "r");
-  ASSERT_NE(proc, nullptr);
-  std::string log;
-  char line[2048];
-  auto read_until = [&](const std::string& prefix) -> std::string {
-    while (fgets(line, sizeof line, proc)) {
-      log += line;
-      if (std::string(line).rfind(prefix, 0) == 0) return line;
-    }
-    return {};
-  };
+  PreviewProcess preview(session.name(), "'" + out.path().string() + "' --size 800x600 --quit-after 120");
+  ASSERT_NE(preview.proc, nullptr);
+  std::string& log = preview.log;
+  auto read_until = [&](const std::string& prefix) { return preview.read_until(prefix); };
   ASSERT_FALSE(read_until("preview: ready").empty()) << log;
   EXPECT_NE(log.find("guidance path: trachea_centerline"), std::string::npos) << log;
 
-  Window w = 0;
-  for (int i = 0; i < 100 && !w; ++i) {
-    w = find_window(d, DefaultRootWindow(d), title);
-    if (!w) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  const Window w = wait_for_window(d, title);
   ASSERT_NE(w, 0u) << "no window titled '" << title << "'";
   int wx = 0, wy = 0;
   Window child;
@@ -184,12 +217,7 @@ TEST(Preview, MouseMovesTheToolKeysSwitchTheModeAndGuidancePullsTheTool) {
     XFlush(d);
     std::this_thread::sleep_for(std::chrono::milliseconds(40));
   };
-  auto press = [&](KeySym sym) {
-    const unsigned int code = XKeysymToKeycode(d, sym);
-    xtest.key(d, code, True, 0);
-    xtest.key(d, code, False, 0);
-    XFlush(d);
-  };
+  auto press = [&](KeySym sym) { press_key(xtest, d, sym); };
   auto settle = [] { std::this_thread::sleep_for(std::chrono::milliseconds(700)); };
   // The mode label: top left, in the mode's colour (green, yellow, red-orange).
   const Rgb guidance_colour{0.45, 1.0, 0.45}, mixed_colour{1.0, 0.85, 0.2}, reaction_colour{1.0, 0.45, 0.35};
@@ -258,8 +286,7 @@ TEST(Preview, MouseMovesTheToolKeysSwitchTheModeAndGuidancePullsTheTool) {
   EXPECT_LT(label_pixels(mixed_shot, guidance_colour), 10u);
 
   press(XK_q);
-  while (fgets(line, sizeof line, proc)) log += line;
-  const int status = pclose(proc);
+  const int status = preview.finish();
   EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << log;
   for (const char* e : {"preview: mode 3 reaction only", "preview: mode 1 guidance only", "preview: mode 2 mixed",
                         "preview: quit"})
@@ -316,34 +343,16 @@ TEST(Preview, TheToolPressesTheOrgansFiniteElementModel) {
   const std::string title = "organsmith preview";
   char start_arg[128];
   std::snprintf(start_arg, sizeof start_arg, "%.3f,%.3f,%.3f", start.x(), start.y(), start.z());
-  const std::string cmd = "DISPLAY=" + session.name() + " exec '" + std::string(ORGANSMITH_CLI) + "' preview '" +
-                          (out / "run").string() + "' --size 800x600 --quit-after 120 --mode reaction --start " + start_arg +
-                          " 2>&1";
-  FILE* proc = popen(cmd.c_str(), "r");
-  ASSERT_NE(proc, nullptr);
-  std::string log;
-  char line[4096];
-  auto read_until = [&](const std::string& prefix) -> std::string {
-    while (fgets(line, sizeof line, proc)) {
-      log += line;
-      if (std::string(line).rfind(prefix, 0) == 0) return line;
-    }
-    return {};
-  };
+  PreviewProcess preview(session.name(), "'" + (out / "run").string() +
+                                             "' --size 800x600 --quit-after 120 --mode reaction --start " + start_arg);
+  ASSERT_NE(preview.proc, nullptr);
+  std::string& log = preview.log;
+  auto read_until = [&](const std::string& prefix) { return preview.read_until(prefix); };
   ASSERT_FALSE(read_until("preview: ready").empty()) << log;
   EXPECT_NE(log.find("gallbladder felt and drawn through its finite-element model"), std::string::npos) << log;
-  Window w = 0;
-  for (int i = 0; i < 100 && !w; ++i) {
-    w = find_window(d, DefaultRootWindow(d), title);
-    if (!w) std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  const Window w = wait_for_window(d, title);
   ASSERT_NE(w, 0u) << "no window titled '" << title << "'";
-  auto press = [&](KeySym sym) {
-    const unsigned int code = XKeysymToKeycode(d, sym);
-    xtest.key(d, code, True, 0);
-    xtest.key(d, code, False, 0);
-    XFlush(d);
-  };
+  auto press = [&](KeySym sym) { press_key(xtest, d, sym); };
   auto wheel_in = [&] {  // towards the viewer: from behind the organ into it
     xtest.button(d, 5, True, 0);
     xtest.button(d, 5, False, 0);
@@ -391,8 +400,7 @@ TEST(Preview, TheToolPressesTheOrgansFiniteElementModel) {
               field(st, "fe_update_hz"), field(st, "fe_update_ms_p99"), field(st, "loop_Hz"));
 
   press(XK_q);
-  while (fgets(line, sizeof line, proc)) log += line;
-  const int rc = pclose(proc);
+  const int rc = preview.finish();
   EXPECT_TRUE(WIFEXITED(rc) && WEXITSTATUS(rc) == 0) << log;
   EXPECT_NE(log.find("preview: fe {"), std::string::npos) << log;
 }
