@@ -26,6 +26,31 @@ std::optional<std::string> read_file(const std::filesystem::path& path) {
   }
 }
 
+std::string read_input_file(const std::filesystem::path& path, const std::string& what, ExitCode too_big,
+                            const std::string& hint, std::uintmax_t max_bytes) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec))
+    throw InputError(ExitCode::input_not_found, what + " is a directory, not a file", path, hint);
+  if (const std::uintmax_t bytes = std::filesystem::file_size(path, ec); !ec && bytes > max_bytes)
+    throw InputError(too_big,
+                     what + " is " + std::to_string(bytes >> 20) + " MiB, more than the limit of " +
+                         std::to_string(max_bytes >> 20) + " MiB",
+                     path, hint);
+  // Read with the limit too: a device or a pipe has no size to check first.
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw InputError(ExitCode::input_not_found, "cannot read " + what, path, hint);
+  std::string text;
+  char chunk[1 << 16];
+  while (in.read(chunk, sizeof chunk) || in.gcount() > 0) {
+    text.append(chunk, std::size_t(in.gcount()));
+    if (text.size() > max_bytes)
+      throw InputError(too_big, what + " holds more than the limit of " + std::to_string(max_bytes >> 20) + " MiB",
+                       path, hint);
+  }
+  if (in.bad()) throw InputError(ExitCode::input_not_found, "cannot read " + what, path, hint);
+  return text;
+}
+
 void write_file_atomic(const std::filesystem::path& path, std::string_view bytes) {
   namespace fs = std::filesystem;
   // The process id keeps two writers of the same path from sharing a temporary file.

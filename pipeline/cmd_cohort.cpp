@@ -154,6 +154,11 @@ std::vector<Command> cohort_commands(CLI::App& app) {
   cmd->add_flag("--no-submit", a->no_submit, "slurm: write cohort/cohort.sbatch and the plan, do not submit");
   cmd->add_option("--poll-s", a->options.poll_s, "seconds between looks at the running studies (default 1)")
       ->check(CLI::Range(0.05, 600.0));
+  cmd->add_option("--scheduler-wait-s", a->options.scheduler_wait_s,
+                  "slurm: how long the controller may stay silent before the cohort stops with exit 81 (default 600); "
+                  "the job array goes on running, and the same command run again collects it without running any "
+                  "study twice")
+      ->check(CLI::Range(1.0, 86400.0));
 
   auto study = std::make_shared<std::pair<std::string, std::size_t>>();
   auto* task = app.add_subcommand("cohort-study", "Run one study of a cohort (what each cohort task runs)");

@@ -85,11 +85,9 @@ CohortPlan load_cohort(const fs::path& cohort_file, const fs::path& shared_case,
   CohortPlan plan;
   plan.cohort_file = fs::absolute(cohort_file);
   plan.out_dir = fs::absolute(out_dir).lexically_normal();
-  const auto text = read_file(cohort_file);
-  if (!text)
-    throw InputError(ExitCode::input_not_found, "cannot read the cohort file", cohort_file,
-                     "give a CSV file whose header is at least id,input");
-  const CsvTable table = parse_csv(*text, cohort_file, ExitCode::case_file);
+  const std::string text = read_input_file(cohort_file, "the cohort file", ExitCode::case_file,
+                                           "give a CSV file whose header is at least id,input");
+  const CsvTable table = parse_csv(text, cohort_file, ExitCode::case_file);
 
   std::string shared_text = default_case_text();
   fs::path origin = plan.cohort_file;

@@ -23,6 +23,7 @@ struct CohortOptions {
   std::vector<std::string> sbatch_lines;  ///< further "#SBATCH …" directives, as given
   bool submit = true;             ///< slurm: false = write the script and the plan only
   double poll_s = 1.0;            ///< how often the engine looks at its studies
+  double scheduler_wait_s = 600;  ///< slurm: how long the controller may stay silent before the run stops (exit 81)
 };
 
 struct StudyOutcome {

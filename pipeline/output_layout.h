@@ -73,6 +73,8 @@ struct CohortLayout {
   std::filesystem::path slurm_script() const { return work_dir() / "cohort.sbatch"; }
   std::filesystem::path status(const std::string& id) const { return work_dir() / "status" / (id + ".json"); }
   std::filesystem::path log(const std::string& id) const { return work_dir() / "logs" / (id + ".log"); }
+  /// Slurm job arrays submitted and not yet collected (a rerun waits for their tasks).
+  std::filesystem::path slurm_arrays() const { return work_dir() / "slurm_arrays.json"; }
   /// Slurm's own output file of array task `index` (what the task printed before it started).
   std::filesystem::path slurm_log_pattern() const { return work_dir() / "logs" / "slurm-%A_%a.out"; }
 };

@@ -204,11 +204,8 @@ ClipPreset parse_clip_preset(const std::string& text, const std::filesystem::pat
 }
 
 ClipPreset read_clip_preset(const std::filesystem::path& path) {
-  const auto text = read_file(path);
-  if (!text)
-    throw InputError(ExitCode::input_not_found, "cannot read the clip preset", path,
-                     "check the path given to --clip");
-  return parse_clip_preset(*text, path);
+  return parse_clip_preset(
+      read_input_file(path, "the clip preset", ExitCode::case_file, "check the path given to --clip"), path);
 }
 
 ClipPreset builtin_clip_preset() { return parse_clip_preset(kClipsToml, "data/clips.toml (embedded)"); }

@@ -368,9 +368,9 @@ MassSeries parse_mass_csv(const std::string& text, const std::filesystem::path& 
 }
 
 MassSeries read_mass_csv(const std::filesystem::path& path, double max_increase) {
-  const auto text = read_file(path);
-  if (!text) throw InputError(ExitCode::input_not_found, "cannot read the mass series", path, "check the path given to --fit");
-  return parse_mass_csv(*text, path, max_increase);
+  return parse_mass_csv(
+      read_input_file(path, "the mass series", ExitCode::calibration_data, "check the path given to --fit"), path,
+      max_increase);
 }
 
 // ---- τ_D fit ------------------------------------------------------------------------------------

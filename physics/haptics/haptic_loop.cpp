@@ -85,15 +85,14 @@ ScriptedDevice::ScriptedDevice(std::vector<double> t, std::vector<Eigen::Vector3
 }
 
 ScriptedDevice ScriptedDevice::read_csv(const fs::path& path) {
-  const std::optional<std::string> text = read_file(path);
-  if (!text) throw InputError(ExitCode::input_not_found, "cannot read the trajectory file", path, "check the file name");
   const std::string hint = "a trajectory is CSV with header t_s,x,y,z (seconds, LPS mm), time strictly increasing";
+  const std::string text = read_input_file(path, "the trajectory file", ExitCode::unsupported_input, hint);
   auto bad = [&](int line, const std::string& what) {
     return InputError(ExitCode::unsupported_input, "line " + std::to_string(line) + ": " + what, path, hint);
   };
   std::vector<CsvRow> rows;
   try {
-    rows = parse_csv_rows(*text, path, ExitCode::unsupported_input);
+    rows = parse_csv_rows(text, path, ExitCode::unsupported_input);
   } catch (const Error& e) {
     throw InputError(e.code(), e.message(), path, hint);
   }

@@ -467,9 +467,8 @@ IncisionPath trachea_incision_path(const Centerline& cl, const SurfaceIndex& wal
 // ---- files ---------------------------------------------------------------------------------------
 
 Polyline read_path_file(const fs::path& path) {
-  const auto file = read_file(path);
-  if (!file) throw InputError(ExitCode::input_not_found, "cannot read the path file", path, "check the file name");
-  const std::string& text = *file;
+  const std::string text = read_input_file(path, "the path file", ExitCode::unsupported_input,
+                                           "a path is a CSV with columns x,y,z (LPS mm) or JSON {\"points_lps_mm\": [[x, y, z], …]}");
   Polyline out;
   out.name = path.stem().string();
   const auto bad = [&](const std::string& what, const std::string& hint = {}) {

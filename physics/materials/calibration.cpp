@@ -164,20 +164,11 @@ CalibrationData parse_calibration_csv(const std::string& text, const std::filesy
 
 CalibrationData read_calibration_csv(const std::filesystem::path& path, bool displacement,
                                      std::size_t min_points) {
-  // Tests of a tissue are hundreds to thousands of rows; the file is read whole, so its size is
-  // checked first (a log or an image given by mistake).
-  constexpr std::uintmax_t kMaxBytes = 64u << 20;
-  std::error_code size_ec;
-  if (const std::uintmax_t bytes = std::filesystem::file_size(path, size_ec); !size_ec && bytes > kMaxBytes)
-    throw InputError(ExitCode::calibration_data,
-                     "the calibration data is " + std::to_string(bytes >> 20) + " MiB, more than the limit of " +
-                         std::to_string(kMaxBytes >> 20) + " MiB",
-                     path, "give the CSV of the tests (stretch and stress per row)");
-  const auto text = read_file(path);
-  if (!text)
-    throw InputError(ExitCode::input_not_found, "cannot read the calibration data", path,
-                     "check the --data path");
-  return parse_calibration_csv(*text, path, displacement, min_points);
+  // Tests of a tissue are hundreds to thousands of rows; a log or an image given by mistake is
+  // refused by its size before it is read.
+  const std::string text = read_input_file(path, "the calibration data", ExitCode::calibration_data,
+                                           "give the CSV of the tests (stretch and stress per row) with --data");
+  return parse_calibration_csv(text, path, displacement, min_points);
 }
 
 // ---- statistics ----------------------------------------------------------------------------------

@@ -193,6 +193,20 @@ std::vector<CorpusCase> csv_corpus(const fs::path& root, std::mt19937& rng) {
          return s;
        }()}};
   for (const auto& [name, text] : cohorts) add("cohort", name, text);
+  // Past the size limit of a table read whole (65 MiB of comment lines: refused by size before
+  // anything is read), and a directory where the file should be.
+  const std::string padding = [] {
+    std::string line = "#" + std::string(1022, 'x') + "\n", big;
+    big.reserve(std::size_t(65) << 20);
+    while (big.size() < (std::size_t(65) << 20)) big += line;
+    return big;
+  }();
+  for (const char* command : {"calibrate", "degrade", "cohort"}) {
+    add(command, "65 MiB", padding);
+    add(command, "a directory", "");
+    fs::remove(cases.back().named);
+    fs::create_directories(cases.back().named);
+  }
   return cases;
 }
 

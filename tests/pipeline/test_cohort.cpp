@@ -9,6 +9,7 @@
 
 #include <chrono>
 #include <csignal>
+#include <cstring>
 #include <cstdlib>
 #include <fstream>
 #include <thread>
@@ -278,4 +279,101 @@ TEST(Cohort, AStudyKilledMidRunIsCompletedByTheRerun) {
   EXPECT_EQ(s["attempts"], 2);
   expect_complete(on_slurm / "k1");
   EXPECT_EQ(manifest_digests(on_slurm / "k1"), manifest_digests(out / "k1"));
+}
+
+TEST(Cohort, AControllerStoppedMidCohortIsExit81AndTheRerunRunsNoStudyTwice) {
+  SlurmCluster cluster;
+  if (cluster.missing_tools()) GTEST_SKIP() << "Slurm is not installed (scripts/install-deps installs slurm-wlm, munge)";
+  ASSERT_TRUE(cluster.up()) << cluster.start_log();
+  ScratchDir tmp("cohort-ctld");
+  write(tmp / "shared.toml",
+        "[case]\ninput = \"phantom\"\n[phantom]\nsize = 64\nslice_mm = 10\n[[organ]]\nname = \"gallbladder\"\n");
+  write(tmp / "cohort.csv", "id,input,phantom.seed\nc1,phantom,1\nc2,phantom,2\nc3,phantom,3\n");
+  const fs::path out = tmp / "out";
+  // One study at a time, so that the later ones wait in the queue while the controller is away.
+  const std::string args = "cohort " + quoted(tmp / "cohort.csv") + " --case " + quoted(tmp / "shared.toml") +
+                           " --engine slurm --jobs 1 --poll-s 0.2 --out " + quoted(out);
+  const std::string script = std::string(ORGANSMITH_SOURCE_DIR) + "/tests/support/slurm_cluster.sh";
+  auto controller = [&](const char* what) {
+    return std::system(("'" + script + "' " + what + " '" + cluster.dir().string() + "' >> '" +
+                        (tmp / "controller.log").string() + "' 2>&1").c_str());
+  };
+
+  // The controller stops while the first study runs: the cohort waits 3 s for it, then exit 81.
+  std::thread stopper([&] {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(120);
+    while (study_process(out, 0) == 0 && std::chrono::steady_clock::now() < deadline)
+      std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    EXPECT_EQ(controller("stop-controller"), 0);
+  });
+  const CliResult r = run_cli(args + " --scheduler-wait-s 3");
+  stopper.join();
+  EXPECT_EQ(r.exit_code, 81) << r.output;
+  EXPECT_NE(r.output.find("the Slurm controller has not answered"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("none runs twice"), std::string::npos) << r.output;
+  EXPECT_TRUE(fs::exists(out / "cohort" / "slurm_arrays.json")) << "the submitted array is remembered";
+  const std::string first_job = read_json(out / "cohort" / "slurm_arrays.json")["arrays"][0]["job"];
+
+  // Controller back: the rerun waits for the tasks of the first array, submits nothing new, and
+  // every study has run exactly once.
+  ASSERT_EQ(controller("start-controller"), 0) << read_file(tmp / "controller.log");
+  const CliResult again = run_cli(args);
+  EXPECT_EQ(again.exit_code, 0) << again.output;
+  EXPECT_NE(again.output.find("still queued or running; waiting for them"), std::string::npos) << again.output;
+  const auto summary = read_json(out / "cohort.json");
+  EXPECT_EQ(summary["slurm_jobs"], nlohmann::json::array({first_job})) << "no study was submitted again";
+  for (const char* id : {"c1", "c2", "c3"}) {
+    const auto s = studies_by_id(out).at(id);
+    EXPECT_TRUE(s["state"] == "done" || s["state"] == "reused") << s.dump();
+    expect_complete(out / id);
+    const std::string log = read_file(out / "cohort" / "logs" / (std::string(id) + ".log"));
+    std::size_t runs = 0;
+    for (auto at = log.find("cohort study '"); at != std::string::npos; at = log.find("cohort study '", at + 1))
+      runs += log.compare(at, 20 + std::strlen(id), "cohort study '" + std::string(id) + "' (row") == 0;
+    EXPECT_EQ(runs, 1u) << id << " ran " << runs << " times:\n" << log;
+  }
+  EXPECT_FALSE(fs::exists(out / "cohort" / "slurm_arrays.json")) << "every array was collected";
+}
+
+// A disk that fills while a cohort runs: each study that meets it ends in exit 30 with nothing
+// half-written (no staging folder, no partial summary); with room again, the same command completes
+// every study.
+TEST(Cohort, AFullDiskFailsItsStudiesWithExit30AndTheRerunCompletesThem) {
+  organsmith::testing::SmallDisk disk("cohortdisk", 32 * 1024);
+  if (!disk.mounted()) GTEST_SKIP() << disk.why();
+  ScratchDir tmp("cohort-disk");
+  write(tmp / "shared.toml",
+        "[case]\ninput = \"phantom\"\n[phantom]\nsize = 64\nslice_mm = 10\n[[organ]]\nname = \"gallbladder\"\n");
+  write(tmp / "cohort.csv", "id,input,phantom.seed\nf1,phantom,1\nf2,phantom,2\n");
+  const fs::path out = disk / "out";
+  const std::string args = "cohort " + quoted(tmp / "cohort.csv") + " --case " + quoted(tmp / "shared.toml") +
+                           " --jobs 1 --poll-s 0.2 --out " + quoted(out);
+  {  // 3 MiB left: a study's folder needs about 6.5 MiB
+    const std::uintmax_t keep = 3u << 20, available = fs::space(disk.path()).available;
+    ASSERT_GT(available, keep);
+    std::ofstream filler(disk / "filler", std::ios::binary);
+    const std::string chunk(1u << 16, 'x');
+    for (std::uintmax_t left = available - keep; left >= chunk.size(); left -= chunk.size())
+      filler.write(chunk.data(), std::streamsize(chunk.size()));
+  }
+  const CliResult full = run_cli(args);
+  EXPECT_TRUE(full.exit_code == 80 || full.exit_code == 30) << full.output;
+  EXPECT_NE(full.output.find("exit 30"), std::string::npos) << full.output;
+  EXPECT_FALSE(has_staging_leftover(out)) << "a staging folder was left on the full disk";
+  if (fs::exists(out / "cohort.json")) {
+    for (const auto& [id, s] : studies_by_id(out)) {
+      EXPECT_EQ(s["state"], "failed") << s.dump();
+      EXPECT_EQ(s["exit_code"], 30) << s.dump();
+      EXPECT_EQ(s["attempts"], 1) << "a full disk is not retried: " << s.dump();
+    }
+  }
+
+  fs::remove(disk / "filler");
+  const CliResult again = run_cli(args);
+  ASSERT_EQ(again.exit_code, 0) << again.output;
+  for (const char* id : {"f1", "f2"}) {
+    EXPECT_EQ(studies_by_id(out).at(id)["state"], "done") << id;
+    expect_complete(out / id);
+  }
+  EXPECT_FALSE(has_staging_leftover(out));
 }

@@ -4,14 +4,51 @@
 #                                DIR/run/*.pid) and waits until the node is idle; clients then need
 #                                only SLURM_CONF=DIR/slurm.conf (the munge socket is named in it)
 #   slurm_cluster.sh stop DIR    cancels every job, stops the daemons by PID and waits until gone
+#   slurm_cluster.sh stop-controller DIR / start-controller DIR
+#                                stops slurmctld alone (jobs go on running on the node) / starts it
+#                                again on its saved state and waits until the node answers
 # Needs Debian's slurm-wlm and munge (scripts/install-deps) and root (the daemons run as root).
 # No cgroups: processes are tracked by process group, memory by polling /proc.
 set -euo pipefail
 source "$(dirname "$0")/free_port.sh"
-cmd=${1:?usage: slurm_cluster.sh start|stop DIR}
-DIR=$(realpath -m "${2:?usage: slurm_cluster.sh start|stop DIR}")
+cmd=${1:?usage: slurm_cluster.sh start|stop|stop-controller|start-controller DIR}
+DIR=$(realpath -m "${2:?usage: slurm_cluster.sh start|stop|stop-controller|start-controller DIR}")
 export SLURM_CONF=$DIR/slurm.conf
 alive() { [ -d "/proc/$1" ] && ! grep -q '^State:[[:space:]]*Z' "/proc/$1/status" 2>/dev/null; }
+
+# Stops daemon $1 by the PID in DIR/run/$1.pid (TERM, then KILL after 15 s) and waits until it is gone.
+stop_daemon() {
+  local name=$1 pf=$DIR/run/$1.pid pid
+  [ -s "$pf" ] || return 0
+  pid=$(cat "$pf")
+  if alive "$pid" && grep -qx "$name" "/proc/$pid/comm" 2>/dev/null; then
+    kill -TERM "$pid" 2>/dev/null || true
+    local end=$(( $(date +%s) + 15 ))
+    while alive "$pid"; do
+      [ "$(date +%s)" -ge $end ] && { kill -KILL "$pid" 2>/dev/null || true; end=$(( end + 5 )); }
+      sleep 0.05
+    done
+  fi
+  rm -f "$pf"
+}
+
+# -D keeps each daemon in the foreground, so $! is its PID; setsid keeps a Ctrl-C aimed at the
+# caller away from them. -i: a state file cut short by a stop is not fatal.
+start_controller() {
+  setsid slurmctld -D -i -f "$SLURM_CONF" >> "$DIR/log/slurmctld.out" 2>&1 < /dev/null &
+  echo $! > "$DIR/run/slurmctld.pid"
+}
+
+# Waits (60 s at most) until the node answers in one of the states given as a pattern.
+wait_for_node() {
+  local want=$1 deadline=$(( $(date +%s) + 60 )) host
+  host=$(hostname -s)
+  until [[ "$(sinfo -h -N -n "$host" -o %T 2>/dev/null || true)" =~ ^($want)$ ]]; do
+    alive "$(cat "$DIR/run/slurmctld.pid")" || { echo "slurm_cluster.sh: slurmctld died" >&2; return 1; }
+    [ "$(date +%s)" -ge $deadline ] && { echo "slurm_cluster.sh: the node does not answer after 60 s" >&2; return 1; }
+    sleep 0.1
+  done
+}
 
 stop() {
   [ -d "$DIR/run" ] || return 0
@@ -20,20 +57,7 @@ stop() {
     local end=$(( $(date +%s) + 10 ))
     while squeue -h -t R,CG 2>/dev/null | grep -q . && [ "$(date +%s)" -lt $end ]; do sleep 0.1; done
   fi
-  for name in slurmd slurmctld munged; do
-    local pf=$DIR/run/$name.pid pid
-    [ -s "$pf" ] || continue
-    pid=$(cat "$pf")
-    if alive "$pid" && grep -qx "$name" "/proc/$pid/comm" 2>/dev/null; then
-      kill -TERM "$pid" 2>/dev/null || true
-      local end=$(( $(date +%s) + 15 ))
-      while alive "$pid"; do
-        [ "$(date +%s)" -ge $end ] && { kill -KILL "$pid" 2>/dev/null || true; end=$(( end + 5 )); }
-        sleep 0.05
-      done
-    fi
-    rm -f "$pf"
-  done
+  for name in slurmd slurmctld munged; do stop_daemon "$name"; done
   # Job processes of this cluster that outlived their step (their environment names our SLURM_CONF).
   for p in /proc/[0-9]*; do
     p=${p#/proc/}
@@ -45,7 +69,14 @@ stop() {
 }
 
 if [ "$cmd" = stop ]; then stop; exit 0; fi
-[ "$cmd" = start ] || { echo "usage: slurm_cluster.sh start|stop DIR" >&2; exit 2; }
+if [ "$cmd" = stop-controller ]; then stop_daemon slurmctld; exit 0; fi
+if [ "$cmd" = start-controller ]; then
+  [ -e "$DIR/slurm.conf" ] || { echo "slurm_cluster.sh: no cluster in $DIR" >&2; exit 2; }
+  start_controller
+  wait_for_node 'idle|mixed|allocated|completing'
+  exit
+fi
+[ "$cmd" = start ] || { echo "usage: slurm_cluster.sh start|stop|stop-controller|start-controller DIR" >&2; exit 2; }
 for tool in munged slurmctld slurmd sbatch; do
   command -v "$tool" >/dev/null || { echo "slurm_cluster.sh: $tool not found (scripts/install-deps installs slurm-wlm and munge)" >&2; exit 3; }
 done
@@ -110,10 +141,7 @@ SlurmdParameters=config_overrides
 NodeName=$HOST NodeAddr=127.0.0.1 $HW RealMemory=$MEM State=UNKNOWN
 PartitionName=debug Nodes=ALL Default=YES MaxTime=INFINITE State=UP
 CONF
-# -D keeps each daemon in the foreground, so $! is its PID; setsid keeps a Ctrl-C aimed at the
-# caller away from them.
-setsid slurmctld -D -i -f "$SLURM_CONF" > "$DIR/log/slurmctld.out" 2>&1 < /dev/null &
-echo $! > "$DIR/run/slurmctld.pid"
+start_controller
 setsid slurmd -D -f "$SLURM_CONF" > "$DIR/log/slurmd.out" 2>&1 < /dev/null &
 echo $! > "$DIR/run/slurmd.pid"
 deadline=$(( $(date +%s) + 60 ))
