@@ -55,6 +55,11 @@ struct OutputLayout {
   /// The indentation's force against depth (an organ whose load case is the probe).
   std::filesystem::path indentation_plot(const std::string& organ) const { return simulation_dir() / (organ + "_indentation.png"); }
   std::filesystem::path simulation_work(const std::string& organ) const { return simulation_dir() / (organ + "_solver"); }
+  /// The solver's log of a simulate run that failed (outside the manifest: the stage wrote nothing;
+  /// removed when the organ next simulates).
+  std::filesystem::path failed_solver_log(const std::string& organ) const {
+    return root / "logs" / ("simulate_" + organ + "_solver.log");
+  }
 
   std::filesystem::path snapshots_dir() const { return root / "snapshots"; }
 };

@@ -369,7 +369,25 @@ class Runner {
         continue;
       }
       const fs::path work = staged.simulation_work(o.name);
-      Simulation sim = simulate_inp(inp, work, so, progress_);
+      Simulation sim;
+      try {
+        sim = simulate_inp(inp, work, so, progress_);
+      } catch (const SimulationError& e) {
+        // The staging folder goes with the failure: the solver's account is kept where the
+        // message can point to it.
+        std::error_code ec;
+        const fs::path kept = layout_.failed_solver_log(o.name);
+        if (e.path().filename() != "solver.log" || !fs::exists(e.path(), ec)) throw;
+        fs::create_directories(kept.parent_path(), ec);
+        if (!ec) fs::copy_file(e.path(), kept, fs::copy_options::overwrite_existing, ec);
+        if (ec) throw;
+        throw SimulationError(e.code(), e.message(), kept, e.hint());
+      }
+      {
+        std::error_code ec;
+        fs::remove(layout_.failed_solver_log(o.name), ec);
+        fs::remove(layout_.failed_solver_log(o.name).parent_path(), ec);  // only when empty
+      }
       // Keep the solver's account (log, status, printed totals), not its bulky result file.
       for (const char* f : {"job.frd", "job.cvg", "job.12d", "spooles.out"}) fs::remove(work / f);
       {  // the answer against the range each region's law was calibrated over

@@ -227,10 +227,11 @@ TEST(BadInputs, AFullDiskWhileWritingDicomIsExit30AndLeavesNothing) {
   EXPECT_EQ(ok.exit_code, 0) << ok.output;
 }
 
-// The solver's bad days: CalculiX killed from outside mid-step, then a disk that fills while it
-// writes. Each ends in its documented code (71 naming the signal; 30 naming the folder) with no
-// results and no staging folder left; with the solver left alone and room on the disk, the rerun
-// completes.
+// The solver's bad days: CalculiX killed from outside mid-step, a disk that fills while it writes,
+// and a corrupt INP (an unstable law; a step the solver cannot finish). Each ends in its documented
+// code (71 naming the signal or the kept solver log; 30 naming the folder; 18 naming the INP) with
+// no results and no staging folder left; with the solver left alone, room on the disk and the INP
+// restored, the rerun completes.
 TEST(BadInputs, SolverKilledOrDiskFullDuringSimulateThenRerun) {
   if (organsmith::find_on_path("ccx").empty()) GTEST_SKIP() << "CalculiX (ccx) not installed: apt-get install calculix-ccx";
   organsmith::testing::SmallDisk disk("simfault", 96 * 1024);
@@ -276,8 +277,42 @@ TEST(BadInputs, SolverKilledOrDiskFullDuringSimulateThenRerun) {
   EXPECT_FALSE(has_staging_leftover(out));
 
   fs::remove(disk / "filler");
+
+  // A corrupt INP: a law with a sign flipped is refused before the solver (18, naming the INP and
+  // the material); a step the solver cannot finish (its increment limit cut to 2) is 71, and the
+  // message points at the solver's log, kept outside the removed staging folder.
+  const fs::path inp = out / "meshes" / "gallbladder" / "gallbladder.inp";
+  const std::string good = organsmith::testing::read_file(inp);
+  const auto edit = [&](const std::string& from, const std::string& to) {
+    std::string text = good;
+    const auto at = text.find(from);
+    ASSERT_NE(at, std::string::npos) << from;
+    text.replace(at, from.size(), to);
+    std::ofstream(inp, std::ios::binary) << text;
+  };
+  {
+    const auto at = good.find("*HYPERELASTIC, OGDEN");
+    ASSERT_NE(at, std::string::npos);
+    const auto line = good.find('\n', at) + 1;
+    edit(good.substr(line, good.find('\n', line) - line), "-" + good.substr(line, good.find('\n', line) - line));
+  }
+  const auto unstable = run_cli("simulate " + quoted(out) + " --organ gallbladder");
+  EXPECT_EQ(unstable.exit_code, int(ExitCode::unsupported_input)) << unstable.output;
+  EXPECT_NE(unstable.output.find(inp.string()), std::string::npos) << unstable.output;
+  EXPECT_NE(unstable.output.find("_MAT"), std::string::npos) << unstable.output;
+  edit("*STEP, NLGEOM, INC=1000", "*STEP, NLGEOM, INC=2");
+  const auto stalled = run_cli("simulate " + quoted(out) + " --organ gallbladder");
+  EXPECT_EQ(stalled.exit_code, int(ExitCode::solver_failed)) << stalled.output;
+  const fs::path kept = out / "logs" / "simulate_gallbladder_solver.log";
+  EXPECT_NE(stalled.output.find(kept.string()), std::string::npos) << stalled.output;
+  EXPECT_NE(organsmith::testing::read_file(kept).find("*ERROR"), std::string::npos) << "the kept log holds the solver's account";
+  EXPECT_FALSE(fs::exists(out / "simulation"));
+  EXPECT_FALSE(has_staging_leftover(out));
+
+  std::ofstream(inp, std::ios::binary) << good;
   ASSERT_EQ(run_cli("simulate " + quoted(out) + " --organ gallbladder", &log), 0) << log;
   const nlohmann::json s = organsmith::testing::read_json(out / "simulation" / "gallbladder.json");
   EXPECT_TRUE(s["converged"].get<bool>()) << s.dump(2);
   EXPECT_FALSE(has_staging_leftover(out));
+  EXPECT_FALSE(fs::exists(out / "logs")) << "a success removes the failed run's log";
 }
