@@ -123,6 +123,14 @@ void write_label_map(const LabelMap& labels, const fs::path& path) {
   itk_io::write_uint8(path.string(), plain(labels.grid), labels.labels.data());
 }
 
+ImageGrid read_image_grid(const fs::path& path) {
+  itk_io::PlainGrid p;
+  itk_io::read_grid(path.string(), p);
+  ImageGrid g = grid(p);
+  g.validate();
+  return g;
+}
+
 double merge_organ_from_label_map(LabelMap& labels, const LabelMap& source, std::uint8_t label) {
   const ImageGrid& g = labels.grid;
   const bool same = g.same_geometry(source.grid);

@@ -33,4 +33,10 @@ void write_volume_file(const Volume& volume, const std::filesystem::path& path);
 /// Writes a label map as uint8 (format from the extension; .nii.gz for stage outputs).
 void write_label_map(const LabelMap& labels, const std::filesystem::path& path);
 
+/// The grid that read_label_map of `path` would give, from the header alone. A file stores its
+/// geometry in single precision (NIfTI), so a map handed on in memory takes the written file's
+/// grid: the next stage then sees the same bits whether the run goes straight on or resumes from
+/// the file.
+ImageGrid read_image_grid(const std::filesystem::path& path);
+
 }  // namespace organsmith

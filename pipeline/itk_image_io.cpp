@@ -93,6 +93,27 @@ void read_float(const std::string& path, PlainGrid& g, const std::function<float
   std::copy(image->GetBufferPointer(), image->GetBufferPointer() + n, allocate(n));
 }
 
+void read_grid(const std::string& path, PlainGrid& g) {
+  register_factories();
+  using ImageT = itk::Image<float, 3>;
+  auto reader = itk::ImageFileReader<ImageT>::New();
+  reader->SetFileName(path);
+  try {
+    reader->UpdateOutputInformation();
+  } catch (const itk::ExceptionObject& e) {
+    throw InputError(ExitCode::unsupported_input, std::string("cannot read the image's header: ") + e.GetDescription(),
+                     path, "give a readable NIfTI, NRRD or MetaImage file");
+  }
+  const ImageT* image = reader->GetOutput();
+  const auto size = image->GetLargestPossibleRegion().GetSize();
+  for (int a = 0; a < 3; ++a) {
+    g.size[a] = std::int64_t(size[a]);
+    g.spacing[a] = image->GetSpacing()[a];
+    g.origin[a] = image->GetOrigin()[a];
+    for (int b = 0; b < 3; ++b) g.direction[3 * a + b] = image->GetDirection()(a, b);
+  }
+}
+
 void write_float(const std::string& path, const PlainGrid& grid, const float* values) {
   write_itk<float>(path, grid, values);
 }

@@ -20,6 +20,8 @@ struct PlainGrid {
 /// Reads any ITK-readable scalar image as float into the buffer that `allocate(voxel_count)`
 /// returns. Throws InputError.
 void read_float(const std::string& path, PlainGrid& grid, const std::function<float*(std::size_t)>& allocate);
+/// The grid of an image file as read_float gives it (its header only: no voxel is read).
+void read_grid(const std::string& path, PlainGrid& grid);
 void write_float(const std::string& path, const PlainGrid& grid, const float* values);
 void write_uint8(const std::string& path, const PlainGrid& grid, const std::uint8_t* values);
 

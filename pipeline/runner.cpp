@@ -611,6 +611,8 @@ class Runner {
     }
     const OutputLayout staged{staging};
     write_label_map(result.labels, staged.labels());
+    // Later stages get the grid the file holds (single precision), as a resumed run reads it.
+    result.labels.grid = read_image_grid(staged.labels());
     for (const auto& organ : result.organs) {
       write_text_atomic(staged.contours(organ.organ), contours_json(organ));
       spdlog::info("segment: {} {:.1f} ml on slices {}–{}", organ.organ, organ.volume_ml, organ.first_slice,

@@ -296,9 +296,9 @@ TEST(Simulate, WithoutTheSolverOnPathTheErrorNamesThePackage) {
   const fs::path out = tmp / "out";
   {
     std::ofstream c(tmp / "case.toml");
-    c << "[case]\ninput = \"phantom\"\n[phantom]\nsize = 256\n[[organ]]\nname = \"trachea\"\n[stages.mesh]\nedge_mm = 4.0\n"
-         "quality_gate = \"report\"\n"  // coarse on purpose; this test is about the missing solver
-         "formats = [\"inp\"]\n";
+    // Coarse on purpose (a 3 s mesh stage): this test is about the missing solver.
+    c << "[case]\ninput = \"phantom\"\n[phantom]\nsize = 256\n[[organ]]\nname = \"gallbladder\"\n[stages.mesh]\n"
+         "edge_mm = 3.0\ntet_edge_mm = 6.0\nquality_gate = \"report\"\nformats = [\"inp\"]\n";
   }
   ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out) + " --until attach").exit_code, 0);
   // Hide ccx: run the same executable with a PATH that holds no solver.
