@@ -142,8 +142,9 @@ std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::p
     const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, dopt, ct);
     const std::string source =
         d.bed_source + (d.bed_source == "liver label" && liver != &labels ? " of the phantom ground truth" : "");
-    spdlog::info("guide: gallbladder liver bed from the {}: {:.0f} % of its surface, rim {:.0f} mm", source,
-                 100.0 * d.covered_fraction, d.length_mm);
+    spdlog::info("guide: gallbladder liver bed from the {}: {:.0f} % of its surface, rim {:.0f} mm turning {:.0f}° "
+                 "(at most {:.1f}°/mm)",
+                 source, 100.0 * d.covered_fraction, d.length_mm, d.total_turning_deg, d.max_turn_deg_per_mm);
     std::vector<std::pair<std::string, double>> props = {
         {"bed_area_mm2", d.bed_area_mm2},
         {"covered_fraction", d.covered_fraction},
@@ -152,7 +153,12 @@ std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::p
         {"max_surface_distance_mm", d.max_surface_distance_mm},
         {"min_self_distance_mm", d.min_self_distance_mm},
         {"rim_loops", double(d.rim_loops)},
-        {"spacing_mm", dopt.spacing_mm}};
+        {"spacing_mm", dopt.spacing_mm},
+        {"total_turning_deg", d.total_turning_deg},
+        {"max_turn_deg_per_mm", d.max_turn_deg_per_mm},
+        {"smoothing_passes", double(d.smoothing_passes)},
+        {"mean_drift_mm", d.mean_drift_mm},
+        {"max_drift_mm", d.max_drift_mm}};
     if (!d.ct_estimate.reason.empty() || !d.ct_estimate.score.empty()) {
       props.push_back({"ct_bile_hu", d.ct_estimate.bile_hu});
       props.push_back({"ct_liver_hu", d.ct_estimate.liver_hu});

@@ -414,6 +414,107 @@ LiverBedScore liver_bed_score(const SurfaceMesh& gb, const LabelMap* liver, cons
   return out;
 }
 
+namespace {
+
+/// Total turning (degrees) and sharpest turn (degrees per mm) of a closed polyline.
+std::pair<double, double> turning(const std::vector<Eigen::Vector3d>& p) {
+  const std::size_t n = p.size();
+  double total = 0, sharpest = 0;
+  for (std::size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3d u = p[i] - p[(i + n - 1) % n], v = p[(i + 1) % n] - p[i];
+    if (u.norm() <= 0 || v.norm() <= 0) continue;
+    const double angle = std::atan2(u.cross(v).norm(), u.dot(v)) * 180.0 / M_PI;
+    total += angle;
+    sharpest = std::max(sharpest, angle / (0.5 * (u.norm() + v.norm())));
+  }
+  return {total, sharpest};
+}
+
+/// A copy of `m` with its small-scale relief (facet creases, folds, slice terraces) smoothed away:
+/// Taubin passes over the vertex neighbourhoods (λ = 0.5, μ = −0.53: no shrinkage).
+SurfaceMesh smoothed_copy(const SurfaceMesh& m, int passes) {
+  SurfaceMesh out = m;
+  const std::size_t n = m.vertices_lps_mm.size();
+  std::vector<std::vector<std::int32_t>> nb(n);
+  for (const auto& t : m.triangles)
+    for (int k = 0; k < 3; ++k) {
+      nb[std::size_t(t[std::size_t(k)])].push_back(t[std::size_t((k + 1) % 3)]);
+      nb[std::size_t(t[std::size_t((k + 1) % 3)])].push_back(t[std::size_t(k)]);
+    }
+  for (auto& l : nb) {
+    std::sort(l.begin(), l.end());
+    l.erase(std::unique(l.begin(), l.end()), l.end());
+  }
+  auto& V = out.vertices_lps_mm;
+  std::vector<Eigen::Vector3d> next(n);
+  for (int it = 0; it < 2 * passes; ++it) {
+    const double f = it % 2 == 0 ? 0.5 : -0.53;
+    for (std::size_t i = 0; i < n; ++i) {
+      if (nb[i].empty()) {
+        next[i] = V[i];
+        continue;
+      }
+      Eigen::Vector3d c = Eigen::Vector3d::Zero();
+      for (auto j : nb[i]) c += V[std::size_t(j)];
+      next[i] = V[i] + f * (c / double(nb[i].size()) - V[i]);
+    }
+    V.swap(next);
+  }
+  return out;
+}
+
+/// Nearest point of the closed polyline `q` to `x` (brute force: a rim has a few hundred points).
+Eigen::Vector3d nearest_on_loop(const std::vector<Eigen::Vector3d>& q, const Eigen::Vector3d& x) {
+  Eigen::Vector3d best = q[0];
+  double best_d = std::numeric_limits<double>::infinity();
+  for (std::size_t i = 0; i < q.size(); ++i) {
+    const Eigen::Vector3d a = q[i], d = q[(i + 1) % q.size()] - a;
+    const double t = d.squaredNorm() > 0 ? std::clamp((x - a).dot(d) / d.squaredNorm(), 0.0, 1.0) : 0.0;
+    const Eigen::Vector3d c = a + t * d;
+    if ((x - c).squaredNorm() < best_d) best_d = (x - c).squaredNorm(), best = c;
+  }
+  return best;
+}
+
+/// Curve-shortening on the surface: Laplacian passes over a closed polyline, each point then held
+/// within o.surface_tolerance_mm of the surface, until no turn exceeds o.max_turn_deg_per_mm (at
+/// most 400 passes). Shortening straightens the loop along the surface (its geodesic curvature
+/// falls): it stops as soon as the sharpest turn is within the limit, so the loop keeps to the
+/// rim (the drift is reported). Returns the passes taken.
+std::size_t smooth_on_surface(std::vector<Eigen::Vector3d>& p, const SurfaceIndex& index, const DissectionOptions& o) {
+  if (p.size() < 5) return 0;
+  std::vector<Eigen::Vector3d> next;
+  std::size_t passes = 0;
+  // A loop cannot turn less sharply than a circle of its length (360° / length per mm): a small
+  // bed's rim is held to twice that, not shortened away.
+  auto limit = [&] {
+    double length = 0;
+    for (std::size_t i = 0; i < p.size(); ++i) length += (p[(i + 1) % p.size()] - p[i]).norm();
+    return std::max(o.max_turn_deg_per_mm, 2 * 360.0 / std::max(length, 1e-9));
+  };
+  while (passes < 400 && turning(p).second > limit()) {
+    if (passes % 10 == 0 && passes > 0) {  // shortening bunches the points: even them out
+      Polyline loop;
+      loop.closed = true;
+      loop.points_lps_mm = p;
+      p = resample_polyline(loop, o.spacing_mm).points_lps_mm;
+    }
+    const std::size_t n = p.size();
+    next.resize(n);
+    for (std::size_t i = 0; i < n; ++i) next[i] = 0.5 * p[i] + 0.25 * (p[(i + n - 1) % n] + p[(i + 1) % n]);
+    for (std::size_t i = 0; i < n; ++i) {
+      Eigen::Vector3d x = next[i];
+      const auto c = index.closest(x);
+      const double d = std::abs(c.signed_distance_mm);
+      p[i] = d > o.surface_tolerance_mm ? c.point_lps_mm + (x - c.point_lps_mm) * (o.surface_tolerance_mm / d) : x;
+    }
+    ++passes;
+  }
+  return passes;
+}
+
+}  // namespace
+
 DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap* liver, const DissectionOptions& o,
                                            const Volume* ct) {
   const auto& V = gb.vertices_lps_mm;
@@ -517,6 +618,21 @@ DissectionPath gallbladder_dissection_path(const SurfaceMesh& gb, const LabelMap
   rim = resample_polyline(rim, o.spacing_mm);
   const SurfaceIndex index({gb});
   for (auto& q : rim.points_lps_mm) q = index.closest(q).point_lps_mm;
+  // Snapped onto facets, the rim turns wherever it crosses an edge between two of them (and
+  // wherever the bed score steps between slices): a curve a hand follows is smoothed along the
+  // surface instead, within a tolerance of it, until its sharpest turn is below the limit.
+  const std::vector<Eigen::Vector3d> snapped = rim.points_lps_mm;
+  out.smoothing_passes = smooth_on_surface(rim.points_lps_mm, SurfaceIndex({smoothed_copy(gb, 30)}), o);
+  for (const auto& q : rim.points_lps_mm) {
+    const double d = (q - nearest_on_loop(snapped, q)).norm();
+    out.max_drift_mm = std::max(out.max_drift_mm, d);
+    out.mean_drift_mm += d / double(rim.points_lps_mm.size());
+  }
+  {
+    const auto [total, sharpest] = turning(rim.points_lps_mm);
+    out.total_turning_deg = total;
+    out.max_turn_deg_per_mm = sharpest;
+  }
   const auto& l = rim.points_lps_mm;
   const std::size_t m = l.size();
   for (std::size_t i = 0; i < m; ++i) {

@@ -80,6 +80,12 @@ struct DissectionOptions {
   /// σ of the smoothing of the bed over the surface and of the rim along its length, mm (default 2).
   double smoothing_mm = 2.0;
   double spacing_mm = 1.0;        ///< point spacing, mm (default 1)
+  /// The path is smoothed along the surface until no turn exceeds this, degrees per mm of path
+  /// (default 15: a hand following it turns at most a quarter circle over 6 mm).
+  double max_turn_deg_per_mm = 15.0;
+  /// How far the smoothed path may leave the (faceted) surface, mm (default 0.5: below the
+  /// facets' own deviation from the organ at a 2–3 mm edge).
+  double surface_tolerance_mm = 0.5;
 };
 
 struct DissectionPath {
@@ -95,6 +101,12 @@ struct DissectionPath {
   /// simple curve (no self-intersection).
   double min_self_distance_mm = 0.0;
   std::size_t rim_loops = 0;      ///< boundary loops of the bed before the longest was kept
+  /// Sum of the angles between neighbouring segments, degrees (a convex plane loop: 360).
+  double total_turning_deg = 0.0;
+  /// Largest angle between neighbouring segments over their mean length, degrees per mm.
+  double max_turn_deg_per_mm = 0.0;
+  std::size_t smoothing_passes = 0;  ///< curvature-limited smoothing passes the path took
+  double mean_drift_mm = 0.0, max_drift_mm = 0.0;  ///< distance of the smoothed path from the rim it was
   /// Per surface vertex: the smoothed bed score (the bed is ≥ 0.5).
   std::vector<double> vertex_score;
   LiverBedEstimate ct_estimate;   ///< the CT's figures when the bed came from (or was tried in) the CT
@@ -120,7 +132,10 @@ LiverBedScore liver_bed_score(const SurfaceMesh& gallbladder, const LabelMap* li
 /// liver label within bed_distance_mm; else `liver_bed_from_ct` on `ct`; else facing
 /// bed_direction_lps — the score is smoothed over the surface (σ = smoothing_mm) and the path is
 /// its 0.5 iso-line (a piecewise-linear iso-line on a closed surface is a set of disjoint simple
-/// loops): the longest loop, smoothed, resampled and snapped back onto the surface. Throws
+/// loops): the longest loop, smoothed, resampled and snapped back onto the surface, then smoothed
+/// along the surface (curve shortening, each point held within surface_tolerance_mm of
+/// a smoothed copy of the surface) until no turn exceeds max_turn_deg_per_mm (at most 400
+/// passes). Throws
 /// InputError (exit code 60) when the bed is empty or covers the whole surface.
 DissectionPath gallbladder_dissection_path(const SurfaceMesh& gallbladder, const LabelMap* liver,
                                            const DissectionOptions& options = {}, const Volume* ct = nullptr);

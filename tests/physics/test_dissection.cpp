@@ -71,6 +71,13 @@ void expect_valid_path(const DissectionPath& d, const DissectionOptions& o) {
   EXPECT_NEAR(step, o.spacing_mm, 0.5 * o.spacing_mm);
   EXPECT_GT(d.covered_fraction, 0.0);
   EXPECT_LT(d.covered_fraction, 1.0);
+  // A line a surgeon follows: once around the bed (a convex plane loop turns 360°), smoothly.
+  EXPECT_LE(d.total_turning_deg, 720.0);
+  EXPECT_LE(d.max_turn_deg_per_mm, 30.0);
+  std::printf("path: %.0f mm, turning %.0f° (at most %.1f°/mm) after %zu passes, drift from the rim mean %.2f mm, "
+              "largest %.2f mm, %.2f mm from the surface\n",
+              d.length_mm, d.total_turning_deg, d.max_turn_deg_per_mm, d.smoothing_passes, d.mean_drift_mm, d.max_drift_mm,
+              d.max_surface_distance_mm);
 }
 
 TEST(Dissection, FromTheCtOfASyntheticScanMatchesTheKnownBed) {
