@@ -162,14 +162,16 @@ std::vector<fs::path> export_meshes(const OrganMeshes& meshes, const fs::path& d
     }
     if (!organ.volume.tets.empty() && (want.count("vtu") || want.count("msh") || want.count("msh22") || want.count("inp") ||
                                        want.count("feb"))) {
+      const auto sc_it = o.scenarios.find(organ.spec.name);
+      const SolverScenario sc = sc_it != o.scenarios.end() ? sc_it->second : default_scenario(organ.spec);
       SolverModelOptions bo = o.boundaries;
       bo.quadratic = o.quadratic;
+      bo.probe_on_tube = sc.indentation;
       const SolverModel v = build_solver_model(organ, bo);
       if (warnings)
         for (const auto& note : v.notes)
-          if (note.find("no load case") != std::string::npos) warnings->push_back(note);
-      const auto sc_it = o.scenarios.find(organ.spec.name);
-      const SolverScenario sc = sc_it != o.scenarios.end() ? sc_it->second : default_scenario(organ.spec);
+          if (note.find("no load case") != std::string::npos || note.find("no indentation probe") != std::string::npos)
+            warnings->push_back(note);
       const std::string n = organ.spec.name;
       if (want.count("vtu")) emit(n + ".vtu", [&](const fs::path& p) { write_vtu(v, p, o.ras); });
       if (want.count("msh")) emit(n + ".msh", [&](const fs::path& p) { write_msh41(v, p, o.ras); });

@@ -122,6 +122,7 @@ SolverScenario default_scenario(const MeshOrganSpec& spec) {
     if (!s.indentation) s.inactive_regions = {spec.name + "_body"};
   } else if (spec.model == OrganModel::tube) {
     s.fixed_surface = "cuts";
+    s.indentation = spec.load_case == "indentation";  // the probe on the anterior wall, both cuts held
   }
   return s;
 }
@@ -400,6 +401,8 @@ SolverModel build_solver_model(const OrganMesh& organ, const SolverModelOptions&
   }
   if (organ.spec.model == OrganModel::wall_body && m.surfaces.count(n + "_liver_bed"))
     add_indentation_probe(m, o.probe_lps_mm, organ.spec.probe_diameter_mm);
+  if (organ.spec.model == OrganModel::tube && o.probe_on_tube && m.surfaces.count(n + "_cuts") && m.surfaces.count(n + "_outer"))
+    add_indentation_probe(m, o.probe_lps_mm, organ.spec.probe_diameter_mm, "cuts");
   for (const auto& [name, fs] : m.surfaces) {
     std::set<std::int32_t> ids;
     for (const auto& f : fs)

@@ -80,6 +80,9 @@ struct SolverModelOptions {
   /// wall_body: where the indentation probe touches (snapped to the free outer surface); empty =
   /// the centre of the free surface opposite the liver bed. Its diameter comes from the spec.
   std::optional<Eigen::Vector3d> probe_lps_mm;
+  /// tube: place the indentation probe too (its scenario presses it): on the anterior outer wall
+  /// halfway between the cuts, or nearest `probe_lps_mm`.
+  bool probe_on_tube = false;
 };
 
 struct SolverFace {
@@ -97,7 +100,7 @@ struct SolverModel {
   std::map<std::string, std::vector<SolverFace>> surfaces;
   std::map<std::string, std::vector<std::int32_t>> node_sets;   ///< sorted, 0-based
   std::vector<std::string> notes;                 ///< how surfaces were found (for file comments)
-  std::optional<SolverProbe> probe;               ///< wall_body with a liver bed: the indentation probe
+  std::optional<SolverProbe> probe;               ///< the indentation probe (wall_body with a liver bed; tube on request)
 
   int nodes_per_element() const { return quadratic ? 10 : 4; }
   /// Node ids (0-based) of face `f` of element `e`: 3 corners, then (quadratic) the 3 mid-edge
@@ -113,12 +116,17 @@ SolverModel build_solver_model(const OrganMesh& organ, const SolverModelOptions&
 
 /// The default scenario of an organ model, from its spec (organ registry `load_case`):
 /// wall_body → liver bed fixed, and the probe (indentation) or `pressure_kPa` in the lumen with
-/// the body inactive (pressure); tube → both cut faces fixed, `pressure_kPa` in the lumen;
+/// the body inactive (pressure); tube → both cut faces fixed, and `pressure_kPa` in the lumen or
+/// (indentation) the probe on the anterior wall at mid-length;
 /// solid or no load case → none (empty fixed_surface).
 SolverScenario default_scenario(const MeshOrganSpec& spec);
 
-/// Places the indentation probe on a wall_body model whose surfaces are built (called by
+/// Places the indentation probe on a model whose surfaces are built (called by
 /// build_solver_model): adds the surface <organ>_probe and sets `m.probe`; a note says where.
-void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>& requested_lps_mm, double diameter_mm);
+/// `fixed` names the held surface's suffix: "liver_bed" (wall_body: by default the centre of the
+/// free surface opposite the bed) or "cuts" (tube: by default the most anterior point of the outer
+/// wall halfway between the cuts, pressed posteriorly along its inward normal).
+void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>& requested_lps_mm, double diameter_mm,
+                           const std::string& fixed = "liver_bed");
 
 }  // namespace organsmith

@@ -1,4 +1,5 @@
-// The indentation probe of a wall_body solver model (see solver_model.h, SolverProbe).
+// The indentation probe of a solver model: a wall_body's opposite its liver bed, a tube's on its
+// anterior wall (see solver_model.h, SolverProbe).
 //
 // Why a bonded rigid disc and not contact: the thesis' stick is a flat rigid cylinder pressed
 // along the surface normal (§5.1.2). Prescribing the displacement of the wall under a 5 mm disc
@@ -45,10 +46,12 @@ double ray_hit(const Eigen::Vector3d& o, const Eigen::Vector3d& d, const Eigen::
 
 }  // namespace
 
-void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>& requested, double diameter_mm) {
+void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>& requested, double diameter_mm,
+                           const std::string& fixed) {
   const std::string n = m.organ;
+  const bool tube = fixed == "cuts";
   const auto& outer = m.surfaces.at(n + "_outer");
-  const auto& bed = m.surfaces.at(n + "_liver_bed");
+  const auto& bed = m.surfaces.at(n + "_" + fixed);
   std::set<std::pair<std::int32_t, std::int32_t>> in_bed;
   std::set<std::int32_t> bed_nodes;
   Eigen::Vector3d bed_normal = Eigen::Vector3d::Zero();
@@ -60,11 +63,11 @@ void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>&
   std::vector<SolverFace> free;
   for (const auto& f : outer)
     if (!in_bed.count({f.tet, f.face})) free.push_back(f);
-  if (free.empty() || bed_normal.norm() < 1e-12) {
-    m.notes.push_back(n + ": no free surface beside the liver bed; no indentation probe");
+  if (free.empty() || (!tube && bed_normal.norm() < 1e-12)) {
+    m.notes.push_back(n + ": no free surface beside the " + (tube ? "cut ends" : "liver bed") + "; no indentation probe");
     return;
   }
-  bed_normal.normalize();
+  if (!tube) bed_normal.normalize();
   Eigen::Vector3d c0 = Eigen::Vector3d::Zero();
   for (const auto& p : m.nodes_lps_mm) c0 += p;
   c0 /= double(m.nodes_lps_mm.size());
@@ -75,6 +78,18 @@ void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>&
   Eigen::Vector3d target;
   if (requested) {
     target = *requested;
+  } else if (tube) {
+    // Halfway between the cuts (along z, the airway's course), the most anterior (−y) outer face:
+    // where a surgeon's instrument meets the trachea's front wall.
+    double z_lo = 1e300, z_hi = -1e300;
+    for (const auto& f : free) z_lo = std::min(z_lo, centroid(m, f).z()), z_hi = std::max(z_hi, centroid(m, f).z());
+    const double z_mid = 0.5 * (z_lo + z_hi);
+    double front = 1e300;
+    for (const auto& f : free)
+      if (std::abs(centroid(m, f).z() - z_mid) <= 3.0) front = std::min(front, centroid(m, f).y());
+    target = Eigen::Vector3d(c0.x(), front, z_mid);
+    for (const auto& f : free)
+      if (std::abs(centroid(m, f).z() - z_mid) <= 3.0 && centroid(m, f).y() == front) target = centroid(m, f);
   } else {
     double best = -1e300;
     for (const auto& f : free) best = std::max(best, (centroid(m, f) - c0).dot(-bed_normal));
@@ -125,6 +140,7 @@ void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>&
                     format_g(probe.point_lps_mm.x(), 5) + ", " + format_g(probe.point_lps_mm.y(), 5) + ", " +
                     format_g(probe.point_lps_mm.z(), 5) + ") LPS mm, " +
                     (requested ? "the free surface nearest the point asked for (" + format_g(dmin, 3) + " mm from it)"
+                     : tube    ? std::string("the front of the anterior wall halfway between the cuts")
                                : std::string("the centre of the free surface opposite the liver bed")) +
                     ", " + format_g(probe.contact_area_mm2, 3) + " mm2; the organ is " + format_g(exit, 3) +
                     " mm thick along its inward normal");

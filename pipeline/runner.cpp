@@ -305,6 +305,12 @@ class Runner {
         sc = default_scenario(pressure_spec);
         sc.pressure_kPa = it->second;
       }
+      if (std::find(mo.indentation.begin(), mo.indentation.end(), spec.name) != mo.indentation.end()) {
+        // The probe asked for (the trachea's anterior wall instead of its airway pressure).
+        MeshOrganSpec probe_spec = spec;
+        probe_spec.load_case = "indentation";
+        sc = default_scenario(probe_spec);
+      }
       sc.probe_depth_mm = case_.stages.simulate.probe_depth_mm;
       ex.scenarios[spec.name] = sc;
     }

@@ -56,6 +56,9 @@ void visit(Visitor& v, MeshStageOptions& o) {
            "a mesh still missing a quality gate after meshing's remedies: enforce (stop, exit 61; default) or report "
            "(warn, quality.json)");
   v.boolean("linear_tets", o.linear_tets, "linear tetrahedra (C3D4/tet4) instead of quadratic (C3D10/tet10)");
+  v.subset("indentation", o.indentation, {"gallbladder", "trachea"},
+           "organs pressed by the thesis' rigid probe instead of a pressure, e.g. [\"trachea\"] (its anterior wall "
+           "halfway between the cuts, both cuts held); [] = each organ's registry load case");
   v.per_organ("pressure_kPa", o.pressure_kPa, 0.0, 100.0, "kPa",
               "a lumen pressure load step for the organs named, e.g. { trachea = 1.0 } (for the gallbladder instead of "
               "its indentation); {} = each organ's registry load case (gallbladder: the 5 mm probe; trachea: 2 kPa)");

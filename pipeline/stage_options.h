@@ -38,6 +38,11 @@ struct MeshStageOptions {
   /// A lumen pressure load step for the organs named, kPa, e.g. { trachea = 1.0 }; for the
   /// gallbladder it replaces the indentation. An organ not named keeps its registry load case.
   std::map<std::string, double> pressure_kPa;
+  /// Organs whose load step is the thesis' indentation (a rigid probe bonded to the free surface,
+  /// displacement-controlled) instead of their registry's pressure, e.g. {"trachea"}: its anterior
+  /// wall halfway between the cuts, both cuts held ([stages.simulate] probe_lps_mm / probe_depth_mm
+  /// place and size it). Default {}: each organ's registry load case.
+  std::vector<std::string> indentation;
   /// Also write each organ's INP with the P5, P50 and P95 variants of its regions' materials
   /// (meshes/<organ>/band/<organ>.p05.inp, …; physics/materials/material_band.h), and the band in
   /// materials.json (default false).

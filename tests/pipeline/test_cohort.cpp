@@ -28,11 +28,13 @@ void write(const fs::path& p, const std::string& text) {
   std::ofstream(p) << text;
 }
 
-/// Three small phantoms (seeds 1–3) and a study whose input is not DICOM.
+/// Three small phantoms (seeds 1–3) and a study whose input is not DICOM. The gallbladder only:
+/// the engines are what these tests check (a 64² phantom's 10 mm-slice trachea spends a minute in
+/// the mesh stage's remedies).
 void write_cohort(const fs::path& dir) {
   write(dir / "shared.toml",
         "[case]\ninput = \"phantom\"\n[phantom]\nsize = 64\nslice_mm = 10\n"
-        "[[organ]]\nname = \"gallbladder\"\n[[organ]]\nname = \"trachea\"\n");
+        "[[organ]]\nname = \"gallbladder\"\n");
   write(dir / kPatientFolder / "IM0001.dcm", "this is not a DICOM file\n");
   write(dir / "cohort.csv",
         std::string("id,input,phantom.seed\ns1,phantom,1\ns2,phantom,2\nbroken,") + kPatientFolder + ",\ns3,phantom,3\n");
@@ -196,7 +198,7 @@ TEST(Cohort, LocalAndSlurmRunTheSameStudiesAndABrokenOneStopsNothing) {
   EXPECT_NE(studies["broken"]["message"].get<std::string>().find("<input>"), std::string::npos);
   const auto table = organsmith::parse_csv(read_file(local / "cohort.csv"), "cohort.csv", organsmith::ExitCode::case_file);
   EXPECT_EQ(table.rows.size(), 4u);
-  EXPECT_GE(table.column("trachea_tet_min_dihedral_deg"), 0);
+  EXPECT_GE(table.column("gallbladder_tet_min_dihedral_deg"), 0);
   EXPECT_EQ(read_file(local / "cohort.png").substr(1, 3), "PNG");
   expect_no_input_path(local);
 

@@ -250,6 +250,52 @@ TEST(Simulate, IndentationCurveRisesBalancesAndStaysInRange) {
   EXPECT_NE(snap.output.find("snapshot: indent_gallbladder.png"), std::string::npos) << snap.output;
 }
 
+// The trachea pressed on its anterior wall ([stages.mesh] indentation = ["trachea"]): the 5 mm
+// probe on the front of the wall halfway between the cuts, pressed posteriorly, both cuts held.
+// CalculiX's curve rises and balances; organsmith's quasi-static 10-node model, pressed the same
+// way, gives the same curve (the same discretisation and law: 1 % catches a wrong element, law or
+// boundary). Coarse tetrahedra keep the solver to seconds.
+TEST(Simulate, TracheaPressedOnItsAnteriorWall) {
+  if (!have_ccx()) GTEST_SKIP() << "CalculiX (ccx) not installed: apt-get install calculix-ccx (scripts/install-deps)";
+  organsmith::testing::ScratchDir tmp("simulate-trachea-probe");
+  const fs::path out = tmp / "out";
+  {
+    std::ofstream c(tmp / "case.toml");
+    c << "[case]\ninput = \"phantom\"\n[phantom]\nsize = 256\n[[organ]]\nname = \"trachea\"\n"
+         "[stages.mesh]\nedge_mm = 4.0\ntet_edge_mm = 6.0\nquality_gate = \"report\"\nformats = [\"inp\"]\n"
+         "indentation = [\"trachea\"]\n[stages.simulate]\nenabled = true\n";
+  }
+  const auto r = run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out) + " --until simulate");
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(file_text(out / "meshes" / "trachea" / "trachea.inp").find("the front of the anterior wall halfway between the cuts"),
+            std::string::npos);
+  const nlohmann::json s = read_json(out / "simulation" / "trachea.json");
+  ASSERT_TRUE(s.contains("indentation")) << s.dump(2);
+  const nlohmann::json& ind = s["indentation"];
+  EXPECT_TRUE(s["converged"].get<bool>()) << s.dump(2);
+  // Posterior (+y in LPS) into the front wall.
+  EXPECT_GT(ind["direction"][1].get<double>(), 0.9) << ind.dump(2);
+  const auto& curve = ind["curve"];
+  ASSERT_GE(curve.size(), 5u) << ind.dump(2);
+  for (std::size_t i = 1; i < curve.size(); ++i)
+    EXPECT_GT(curve[i][1].get<double>(), curve[i - 1][1].get<double>()) << "force at point " << i;
+  EXPECT_LT(ind["reaction_balance_error"].get<double>(), 0.01) << ind.dump(2);
+
+  const auto ind_run = run_cli("haptics " + quoted(out) + " --indent trachea --out " + quoted(tmp / "indent.json"));
+  ASSERT_EQ(ind_run.exit_code, 0) << ind_run.output;
+  const nlohmann::json h = read_json(tmp / "indent.json");
+  ASSERT_TRUE(h.contains("solver_curve")) << h.dump(2);
+  EXPECT_LT(h["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>(), 0.01) << h["solver_curve"].dump(2);
+  // The real-time (linear, ~2400-node) model's press is reported, not checked here: on a tube this
+  // fine it misses the 60 Hz budget (TISSUE.md).
+  std::printf("trachea probe: %zu points to %.3g mm, %.3g N; haptics --indent within %.2g of CalculiX past 20 %% of the "
+              "depth; real-time model %d nodes, update p99 %.3g ms, hold force %.3g x the solver's, rest %.3g of the depth\n",
+              curve.size(), ind["depth_mm"].get<double>(), curve.back()[1].get<double>(),
+              h["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>(), h["fe"]["nodes"].get<int>(),
+              h["fe"]["update_ms_p99"].get<double>(), h["fe"]["press"].value("ratio_to_calculix_probe", 0.0),
+              h["fe"]["press"]["rest_fraction_of_depth"].get<double>());
+}
+
 // A scan the phantom is not: the gallbladder of a 3 mm abdominal CT (the reference mask, meshed at
 // a 3 mm edge), its liver bed found in the CT itself (no liver label), run unedited. Fixed on the
 // flat cranial lid the liver's usual direction picks, it did not converge; fixed where the CT says
