@@ -29,7 +29,7 @@ test: build
 
 # The sanitizer job: ASan + UBSan (asserts on, -O1) build in build-asan/ of the CLI and the tests
 # of everything that reads untrusted input — ingest of every format, case files, TOML, CSV,
-# segmentation, label-map checks before meshing, and the corpus suite, whose 412 hostile inputs
+# segmentation, label-map checks before meshing, and the corpus suite, whose 418 hostile inputs
 # go through the instrumented CLI; and the meshing tests that reach CGAL's preconditions (asserts
 # are on in this build: flat cuts, the tube-wall join, the label touching the border; of the
 # phantom's six, the trachea's: each meshes the phantom, ≈ 50 s under ASan). CGAL's own code is left uninstrumented (meshing/CMakeLists.txt).
