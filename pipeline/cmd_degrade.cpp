@@ -6,6 +6,8 @@
 // mass-remaining series (Table 6.1). Output formats: physics/degradation/DEGRADATION.md ("Outputs").
 
 #include "core/errors.h"
+#include "core/file_io.h"
+#include "pipeline/tool_info.h"
 #include "core/format.h"
 #include "core/vtk_xml.h"
 #include "physics/materials/calibration.h"
@@ -13,7 +15,6 @@
 #include "physics/degradation/degradation.h"
 #include "pipeline/commands.h"
 #include "pipeline/output_dir.h"
-#include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
 #include "viewer/display.h"
 #include "viewer/snapshot.h"
@@ -325,14 +326,14 @@ int run_simulate(const DegradeFlags& f) {
 
   const fs::path out = dir.path();
   dir.commit("degrade", [&](const fs::path& dir) {
-    write_text_atomic(dir / "original.vtp", stage_vtp(model, nullptr, "original (stress-free) shape"));
-    write_text_atomic(dir / "stage_0_0.0w.vtp", stage_vtp(model, &r.initial, "deployed, t = 0"));
+    write_file_atomic(dir / "original.vtp", stage_vtp(model, nullptr, "original (stress-free) shape"));
+    write_file_atomic(dir / "stage_0_0.0w.vtp", stage_vtp(model, &r.initial, "deployed, t = 0"));
     for (std::size_t k = 0; k < r.stages.size(); ++k)
-      write_text_atomic(dir / st[k + 1]["file"].get<std::string>(),
+      write_file_atomic(dir / st[k + 1]["file"].get<std::string>(),
                  stage_vtp(model, &r.stages[k], "t = " + num(r.stages[k].t_days) + " days"));
-    write_text_atomic(dir / "mass.csv", csv.str());
+    write_file_atomic(dir / "mass.csv", csv.str());
     if (f.snapshots) write_plot_pngs(degradation_plots(model, r, f.load_n, f.tau_d), dir);
-    write_text_atomic(dir / "summary.json", j.dump(2) + "\n");
+    write_file_atomic(dir / "summary.json", j.dump(2) + "\n");
   });
   std::cout << "clip " << p.name << " (" << g.elements() << " elements) under " << num(f.load_n) << " N, τ_D "
             << num(f.tau_d) << " " << kTauUnitName << "\n"
@@ -395,9 +396,9 @@ int run_fit(const DegradeFlags& f) {
   for (const auto& s : curve.steps) curve_csv << num(s.t_days) << ',' << num(s.mass_fraction) << '\n';
   const fs::path out = out_dir.path();
   out_dir.commit("degrade-fit", [&](const fs::path& dir) {
-    write_text_atomic(dir / "fit.json", j.dump(2) + "\n");
-    write_text_atomic(dir / "fit.csv", csv.str());
-    write_text_atomic(dir / "model_mass.csv", curve_csv.str());
+    write_file_atomic(dir / "fit.json", j.dump(2) + "\n");
+    write_file_atomic(dir / "fit.csv", csv.str());
+    write_file_atomic(dir / "model_mass.csv", curve_csv.str());
     if (f.snapshots) {
       Plot p;
       p.name = "degradation_fit";

@@ -4,6 +4,7 @@
 // The science is in physics/haptics/HAPTICS.md.
 
 #include "core/errors.h"
+#include "core/file_io.h"
 #include "meshing/export.h"
 #include "physics/haptics/contact.h"
 #include "physics/haptics/guidance.h"
@@ -112,9 +113,9 @@ int run_guide(const GuideFlags& f) {
     fs::create_directories(paths);
     if (user) {
       user->name = fs::path(f.path).stem().string();
-      write_text_atomic(paths / (user->name + ".json"),
+      write_file_atomic(paths / (user->name + ".json"),
                         path_json(*user, {{"recorded", 1.0}, {"length_mm", user->length_mm()}}));
-      write_text_atomic(paths / (user->name + ".vtp"), path_vtp(*user));
+      write_file_atomic(paths / (user->name + ".vtp"), path_vtp(*user));
       written = {user->name + ".json", user->name + ".vtp"};
     } else {
       const std::optional<CaseFile> run = case_of_run(out);
@@ -149,7 +150,7 @@ int run_indent(const HapticsFlags& f) {
   o.picture_png = fs::path(f.report).replace_extension(".png");
   TerminalProgress progress;
   const nlohmann::json r = haptics_indent(out, f.indent, o, progress);
-  write_text_atomic(f.report, r.dump(2) + "\n");
+  write_file_atomic(f.report, r.dump(2) + "\n");
   const auto& c = r["curve"];
   std::cout << "indent " << f.indent << " (" << r["curve_model"]["nodes"] << " nodes, " << r["curve_model"]["tets"] << " tets): "
             << c.back()[1].get<double>() * 1e3 << " mN at " << c.back()[0].get<double>() << " mm";
@@ -309,7 +310,7 @@ int run_haptics(HapticsFlags f) {
     r["fe"]["force_jitter_us_p99"] = st.jitter_us.p99;
     r["contact"]["organs"].push_back({{"organ", fe_organ}, {"finite_element_model", fe->fe.inp.string()}});
   }
-  write_text_atomic(f.report, r.dump(2) + "\n");
+  write_file_atomic(f.report, r.dump(2) + "\n");
   std::cout << "haptics (" << mode_name(f.loop.mode) << ", " << path.name << "): tool–path error RMS "
             << std::sqrt(se / n) << " mm, max " << emax << " mm (device " << std::sqrt(dse / n) << " mm); force peak "
             << fmax << " N, mean " << fsum / n << " N\n";

@@ -5,6 +5,8 @@
 // thesis parameter sets embedded from data/materials.toml).
 
 #include "core/csv.h"
+#include "core/file_io.h"
+#include "pipeline/tool_info.h"
 #include "core/errors.h"
 #include "core/format.h"
 #include "physics/materials/calibration.h"
@@ -13,7 +15,6 @@
 #include "pipeline/commands.h"
 #include "pipeline/organ_registry.h"
 #include "pipeline/output_dir.h"
-#include "pipeline/runner.h"
 #include "pipeline/terminal_progress.h"
 
 #include <nlohmann/json.hpp>
@@ -47,7 +48,7 @@ std::string load_name(LoadCase l) {
 void commit_files(OutputDir& dir, const std::string& stage,
                   const std::vector<std::pair<std::string, std::string>>& files) {
   dir.commit(stage, [&](const fs::path& staging) {
-    for (const auto& [name, text] : files) write_text_atomic(staging / name, text);
+    for (const auto& [name, text] : files) write_file_atomic(staging / name, text);
   });
 }
 

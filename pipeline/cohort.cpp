@@ -1,5 +1,6 @@
 // Cohort files: reading, validating and resolving each row into the study's complete case.
 #include "pipeline/cohort.h"
+#include "pipeline/tool_info.h"
 
 #include "core/csv.h"
 #include "core/errors.h"
@@ -7,7 +8,6 @@
 #include "core/sha256.h"
 #include "core/toml_parse.h"
 #include "pipeline/case_file.h"
-#include "pipeline/runner.h"
 
 #include <toml++/toml.h>
 

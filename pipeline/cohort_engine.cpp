@@ -1,6 +1,7 @@
 // A cohort's run: reuse of completed studies, the local process pool, retries, progress and the
 // summary at the end (the Slurm engine is in cohort_slurm.cpp).
 #include "pipeline/cohort_engine.h"
+#include "pipeline/tool_info.h"
 #include "pipeline/cohort_engine_detail.h"
 
 #include "core/errors.h"
@@ -10,7 +11,6 @@
 #include "pipeline/cohort_summary.h"
 #include "pipeline/output_dir.h"
 #include "pipeline/output_layout.h"
-#include "pipeline/runner.h"
 
 #include <spdlog/spdlog.h>
 

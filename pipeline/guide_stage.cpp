@@ -1,11 +1,11 @@
 #include "pipeline/guide_stage.h"
+#include "core/file_io.h"
 
 #include "core/errors.h"
 #include "meshing/export.h"
 #include "physics/haptics/contact.h"
 #include "pipeline/image_io.h"
 #include "pipeline/output_layout.h"
-#include "pipeline/runner.h"
 #include "viewer/mesh_files.h"
 
 #include <spdlog/spdlog.h>
@@ -103,8 +103,8 @@ std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::p
   std::vector<std::string> written;
   auto emit = [&](const Polyline& line, const std::vector<std::pair<std::string, double>>& props,
                   const std::vector<std::pair<std::string, std::string>>& notes = {}) {
-    write_text_atomic(dest_dir / (line.name + ".json"), physics::path_json(line, props, notes));
-    write_text_atomic(dest_dir / (line.name + ".vtp"), physics::path_vtp(line));
+    write_file_atomic(dest_dir / (line.name + ".json"), physics::path_json(line, props, notes));
+    write_file_atomic(dest_dir / (line.name + ".vtp"), physics::path_vtp(line));
     written.push_back(line.name + ".json");
     written.push_back(line.name + ".vtp");
   };

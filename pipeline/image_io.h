@@ -28,7 +28,7 @@ LabelMap read_label_map(const std::filesystem::path& path);
 double merge_organ_from_label_map(LabelMap& labels, const LabelMap& source, std::uint8_t label);
 
 /// Writes a volume as float (format from the extension). Not atomic: callers write into a
-/// staging directory (see pipeline/runner.h).
+/// staging directory (see pipeline/output_dir.h).
 void write_volume_file(const Volume& volume, const std::filesystem::path& path);
 /// Writes a label map as uint8 (format from the extension; .nii.gz for stage outputs).
 void write_label_map(const LabelMap& labels, const std::filesystem::path& path);

@@ -1,6 +1,7 @@
 // The organsmith command line.
 
 #include "core/errors.h"
+#include "pipeline/tool_info.h"
 #include "core/format.h"
 #include "pipeline/case_file.h"
 #include "pipeline/commands.h"

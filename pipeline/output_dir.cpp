@@ -3,17 +3,34 @@
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/sha256.h"
-#include "pipeline/runner.h"
+#include "pipeline/tool_info.h"
 
 #include <spdlog/spdlog.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <fstream>
+#include <random>
 #include <regex>
 #include <set>
+#include <sstream>
 
 namespace organsmith {
+
+std::filesystem::path make_staging_dir(const std::filesystem::path& final_path) {
+  namespace fs = std::filesystem;
+  std::random_device rd;
+  for (int attempt = 0; attempt < 100; ++attempt) {
+    std::ostringstream name;
+    name << final_path.filename().string() << ".staging-" << std::hex << rd();
+    const fs::path p = final_path.parent_path() / name.str();
+    std::error_code ec;
+    if (fs::create_directories(p, ec)) return p;
+    if (ec) throw OutputError("cannot create a staging directory: " + ec.message(), p,
+                              "check that the output directory is writable");
+  }
+  throw OutputError("cannot create a unique staging directory", final_path);
+}
 
 namespace fs = std::filesystem;
 

@@ -12,6 +12,9 @@
 
 namespace organsmith {
 
+/// A fresh staging directory next to `final_path` (same file system, so renames are atomic).
+std::filesystem::path make_staging_dir(const std::filesystem::path& final_path);
+
 struct OutputDirOptions {
   /// The command's own inputs (files or directories). The output may be neither inside nor above
   /// any of them, unless the input is a file organsmith wrote into this very directory.

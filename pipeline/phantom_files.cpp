@@ -1,9 +1,9 @@
 #include "pipeline/phantom_files.h"
+#include "core/file_io.h"
 
 #include "core/errors.h"
 #include "pipeline/dicom.h"
 #include "pipeline/image_io.h"
-#include "pipeline/runner.h"
 
 #include <nlohmann/json.hpp>
 
@@ -24,7 +24,7 @@ void write_phantom_files(const Phantom& phantom, const PhantomOptions& options, 
   nlohmann::json seeds = nlohmann::json::object();
   for (const auto& [organ, p] : phantom.seeds_lps_mm) seeds[organ] = {p.x(), p.y(), p.z()};
   nlohmann::json j = {{"frame", "LPS"}, {"unit", "mm"}, {"seeds_lps_mm", seeds}};
-  write_text_atomic(dir / "seeds.json", j.dump(2) + "\n");
+  write_file_atomic(dir / "seeds.json", j.dump(2) + "\n");
 }
 
 std::map<std::string, Eigen::Vector3d> read_seeds(const fs::path& seeds_json) {

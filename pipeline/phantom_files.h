@@ -8,7 +8,7 @@
 
 namespace organsmith {
 
-/// Writes `phantom` into `dir` (which must exist and be empty; callers stage it, see runner.h).
+/// Writes `phantom` into `dir` (which must exist and be empty; callers stage it, see output_dir.h).
 /// UIDs derive from the options, so the same options give byte-identical files.
 void write_phantom_files(const Phantom& phantom, const PhantomOptions& options,
                          const std::filesystem::path& dir, Progress& progress);

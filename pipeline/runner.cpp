@@ -3,6 +3,7 @@
 // from their fingerprints would spread that knowledge over several files.
 
 #include "pipeline/runner.h"
+#include "pipeline/tool_info.h"
 
 #include "pacs/pacs.h"
 
@@ -10,7 +11,6 @@
 #include "core/file_io.h"
 #include "core/memory.h"
 #include "core/sha256.h"
-#include "organsmith_version.h"  // generated at build time: version and git commit
 #include "pipeline/guide_stage.h"
 #include "pipeline/ingest.h"
 #include "pipeline/phantom.h"
@@ -45,9 +45,6 @@
 namespace organsmith {
 
 namespace fs = std::filesystem;
-
-std::string tool_version() { return ORGANSMITH_VERSION_STRING; }
-std::string tool_git_commit() { return ORGANSMITH_GIT_COMMIT; }
 
 namespace {
 
@@ -236,7 +233,7 @@ class Runner {
                [&](const fs::path& staging) { write_meshes(staging); }});
       execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
                [&](const fs::path& staging) {
-                 write_text_atomic(OutputLayout{staging}.materials(), materials_json().dump(2) + "\n");
+                 write_file_atomic(OutputLayout{staging}.materials(), materials_json().dump(2) + "\n");
                }});
       // guide: guidance paths (trachea centreline and incision, gallbladder dissection) in paths/.
       // The CT (ingest) gives the gallbladder's liver bed where no liver label does.
@@ -620,7 +617,7 @@ class Runner {
     // Later stages get the grid the file holds (single precision), as a resumed run reads it.
     result.labels.grid = read_image_grid(staged.labels());
     for (const auto& organ : result.organs) {
-      write_text_atomic(staged.contours(organ.organ), contours_json(organ));
+      write_file_atomic(staged.contours(organ.organ), contours_json(organ));
       spdlog::info("segment: {} {:.1f} ml on slices {}–{}", organ.organ, organ.volume_ml, organ.first_slice,
                    organ.last_slice);
       for (const auto& note : organ.notes) spdlog::info("segment: {}: {}", organ.organ, note);
@@ -666,7 +663,7 @@ class Runner {
     model_.seeds = resolve_seeds(r.volume.grid);
     j["organs"] = ingest_seeds_json(*model_.seeds, r.volume.grid);
     input_json_ = {{"format", j["format"]}, {"digest_sha256", input_digest_}, {"grid", j["grid"]}};
-    write_text_atomic(OutputLayout{staging}.ingest(), j.dump(2) + "\n");
+    write_file_atomic(OutputLayout{staging}.ingest(), j.dump(2) + "\n");
     model_.ct = std::move(r.volume);
   }
 
@@ -804,22 +801,6 @@ class Runner {
 };
 
 }  // namespace
-
-fs::path make_staging_dir(const fs::path& final_path) {
-  std::random_device rd;
-  for (int attempt = 0; attempt < 100; ++attempt) {
-    std::ostringstream name;
-    name << final_path.filename().string() << ".staging-" << std::hex << rd();
-    const fs::path p = final_path.parent_path() / name.str();
-    std::error_code ec;
-    if (fs::create_directories(p, ec)) return p;
-    if (ec) throw OutputError("cannot create a staging directory: " + ec.message(), p,
-                              "check that the output directory is writable");
-  }
-  throw OutputError("cannot create a unique staging directory", final_path);
-}
-
-void write_text_atomic(const fs::path& path, const std::string& text) { write_file_atomic(path, text); }
 
 const std::vector<std::string>& stage_names() {
   static const std::vector<std::string> names = {"phantom", "ingest", "segment", "mesh", "attach", "guide", "simulate",

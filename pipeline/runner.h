@@ -50,14 +50,4 @@ struct RunSummary {
 /// never left behind (each stage writes into a staging directory that is renamed into place).
 RunSummary run_case(const CaseFile& c, const RunOptions& options, Progress& progress);
 
-/// A fresh staging directory next to `final_path` (same file system, so renames are atomic).
-std::filesystem::path make_staging_dir(const std::filesystem::path& final_path);
-
-/// Writes `text` to `path` atomically (temporary file in the same directory, then rename).
-void write_text_atomic(const std::filesystem::path& path, const std::string& text);
-
-/// organsmith's version and the git commit it was built from.
-std::string tool_version();
-std::string tool_git_commit();
-
 }  // namespace organsmith

@@ -8,7 +8,6 @@
 #include "core/format.h"
 #include "core/grid.h"
 #include "core/process.h"
-#include "pipeline/runner.h"
 #include "meshing/export.h"
 
 #include <Eigen/Dense>
@@ -763,7 +762,7 @@ void write_simulation_files(const SolverInput& in, const FrdResult& frd, const S
   fields.push_back(std::move(u));
   fields.push_back(std::move(vm));
   write_vtu(in.model, dir / (r.organ + ".vtu"), in.ras, fields);
-  write_text_atomic(dir / (r.organ + ".json"), r.to_json().dump(2) + "\n");
+  write_file_atomic(dir / (r.organ + ".json"), r.to_json().dump(2) + "\n");
 }
 
 }  // namespace organsmith
