@@ -4,6 +4,8 @@
 
 #include "core/errors.h"
 #include "pipeline/case_file.h"
+#include "pipeline/output_dir.h"
+#include "pipeline/output_layout.h"
 
 #include <toml++/toml.h>
 
@@ -70,17 +72,9 @@ CaseFile case_from_manifest(const nlohmann::json& m, const fs::path& manifest_fi
 }
 
 std::optional<CaseFile> case_of_run(const fs::path& dir) {
-  const fs::path file = dir / "manifest.json";
-  std::ifstream in(file);
-  if (!in) return std::nullopt;
-  nlohmann::json m;
-  try {
-    m = nlohmann::json::parse(in);
-  } catch (const nlohmann::json::exception&) {
-    return std::nullopt;
-  }
-  if (!m.is_object() || !m.contains("case")) return std::nullopt;
-  CaseFile c = case_from_manifest(m, file);
+  const std::optional<nlohmann::json> m = read_manifest(dir);
+  if (!m || !m->contains("case")) return std::nullopt;
+  CaseFile c = case_from_manifest(*m, OutputLayout{dir}.manifest());
   c.out_dir = dir;
   return c;
 }

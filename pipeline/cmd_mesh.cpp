@@ -5,6 +5,7 @@
 #include "meshing/export.h"
 #include "meshing/mesh.h"
 #include "physics/materials/presets.h"
+#include "pipeline/output_layout.h"
 #include "pipeline/commands.h"
 #include "pipeline/guide_stage.h"
 #include "pipeline/organ_registry.h"
@@ -91,7 +92,7 @@ int continue_run(const MeshFlags& f) {
     throw UsageError("--organ applies to a label map file", "`mesh DIR` meshes the organs of DIR's case");
   std::optional<CaseFile> run = case_of_run(f.input);
   if (!run)
-    throw InputError(ExitCode::input_not_found, "the directory holds no run", fs::path(f.input) / "manifest.json",
+    throw InputError(ExitCode::input_not_found, "the directory holds no run", OutputLayout{f.input}.manifest(),
                      "give a label map file, or the directory `organsmith segment` or `run` wrote");
   CaseFile& c = *run;
   MeshStageOptions& m = c.stages.mesh;

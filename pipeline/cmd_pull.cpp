@@ -2,6 +2,7 @@
 // cache (pacs/pacs.h), ready as the input of `organsmith run`.
 
 #include "pacs/pacs.h"
+#include "pipeline/output_layout.h"
 #include "pipeline/commands.h"
 #include "pipeline/terminal_progress.h"
 
@@ -30,7 +31,7 @@ struct PullArgs {
 /// The cache holds patient data: never inside (or as) an organsmith output directory.
 void check_cache_location(const fs::path& cache) {
   for (fs::path p = fs::absolute(cache).lexically_normal(); !p.empty(); p = p.parent_path()) {
-    if (fs::exists(p / "manifest.json"))
+    if (fs::exists(OutputLayout{p}.manifest()))
       throw OutputError("the PACS cache would lie inside an organsmith output directory (" + p.string() + ")", cache,
                         "keep the cache apart from outputs: it holds patient data, outputs must not");
     if (p == p.parent_path()) break;

@@ -77,12 +77,11 @@ std::pair<double, double> measured_study_cost(const CohortPlan& plan) {
   double rss = 0, seconds = 0;
   const CohortLayout layout{plan.out_dir};
   for (const auto& s : plan.studies) {
-    const auto text = read_file(OutputLayout{layout.study(s.id)}.manifest());
-    if (!text) continue;
+    const auto m = read_manifest(layout.study(s.id));
+    if (!m) continue;
     try {
-      const auto m = nlohmann::json::parse(*text);
       double total = 0;
-      for (const auto& st : m.at("stages")) {
+      for (const auto& st : m->at("stages")) {
         rss = std::max(rss, st.value("peak_rss_mib", 0.0));
         total += st.value("seconds", 0.0);
       }

@@ -7,6 +7,7 @@
 #include "physics/materials/presets.h"
 #include "physics/materials/material_band.h"
 #include "physics/materials/solver_fit.h"
+#include "pipeline/output_dir.h"
 #include "pipeline/stage_options.h"
 #include "segmentation/presets.h"
 
@@ -286,13 +287,8 @@ OrganRegistry parse_organ_registry(std::string_view text, const fs::path& origin
 }
 
 OrganRegistry registry_of_output(const fs::path& out_dir) {
-  std::ifstream in(out_dir / "manifest.json");
-  nlohmann::json m;
-  try {
-    if (in) m = nlohmann::json::parse(in);
-  } catch (const nlohmann::json::exception&) {
-  }
-  if (!m.is_object() || !m.contains("case") || !m["case"].is_object() || !m["case"].contains("organ_registry") ||
+  const nlohmann::json m = read_manifest(out_dir).value_or(nlohmann::json::object());
+  if (!m.contains("case") || !m["case"].is_object() || !m["case"].contains("organ_registry") ||
       !m["case"]["organ_registry"].is_string())
     return builtin_organ_registry();
   const fs::path file = m["case"]["organ_registry"].get<std::string>();

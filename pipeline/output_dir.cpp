@@ -3,6 +3,7 @@
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/sha256.h"
+#include "pipeline/output_layout.h"
 #include "pipeline/tool_info.h"
 
 #include <spdlog/spdlog.h>
@@ -16,6 +17,19 @@
 #include <sstream>
 
 namespace organsmith {
+
+std::optional<nlohmann::json> read_manifest(const std::filesystem::path& out_dir) {
+  const auto text = read_file(OutputLayout{out_dir}.manifest());
+  if (!text) return std::nullopt;
+  try {
+    nlohmann::json m = nlohmann::json::parse(*text);
+    if (m.is_object() && m.contains("tool") && m["tool"].is_object() && m["tool"].value("name", "") == "organsmith" &&
+        m.contains("stages") && m["stages"].is_array())
+      return m;
+  } catch (const nlohmann::json::exception&) {
+  }
+  return std::nullopt;
+}
 
 std::filesystem::path make_staging_dir(const std::filesystem::path& final_path) {
   namespace fs = std::filesystem;
@@ -57,18 +71,13 @@ bool is_leftover(const fs::directory_entry& e) {
   return e.is_regular_file(ec) && std::regex_match(name, temp);
 }
 
-nlohmann::json read_manifest(const fs::path& dir) {
+/// The manifest a previous run left in `dir`, else an empty object (a file that is not an
+/// organsmith manifest is reported: every file of the directory is then the user's).
+nlohmann::json manifest_left_in(const fs::path& dir) {
   const fs::path file = dir / kManifest;
   std::error_code ec;
   if (!fs::is_regular_file(file, ec)) return nlohmann::json::object();
-  std::ifstream in(file);
-  try {
-    nlohmann::json m = nlohmann::json::parse(in);
-    if (m.is_object() && m.contains("tool") && m["tool"].is_object() && m["tool"].value("name", "") == "organsmith" &&
-        m.contains("stages") && m["stages"].is_array())
-      return m;
-  } catch (const nlohmann::json::exception&) {
-  }
+  if (auto m = read_manifest(dir)) return std::move(*m);
   spdlog::warn("{} is not an organsmith manifest: every file in {} is treated as the user's", file.string(),
                dir.string());
   return nlohmann::json::object();
@@ -128,7 +137,7 @@ OutputDir::OutputDir(fs::path dir, OutputDirOptions options) : dir_(normalised(d
       throw OutputError("cannot create the output directory: " + p.string() + " is not writable", dir_,
                         "choose --out in a folder you can write to");
   }
-  if (existed_) previous_ = read_manifest(dir_);
+  if (existed_) previous_ = manifest_left_in(dir_);
 
   for (const auto& input : options_.inputs) {
     if (input.empty()) continue;

@@ -7,6 +7,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -14,6 +15,10 @@ namespace organsmith {
 
 /// A fresh staging directory next to `final_path` (same file system, so renames are atomic).
 std::filesystem::path make_staging_dir(const std::filesystem::path& final_path);
+
+/// The manifest of the output directory `out_dir` (OutputLayout::manifest()), parsed: nothing when
+/// it is absent, unreadable or not a JSON object. The one reader of another run's manifest.
+std::optional<nlohmann::json> read_manifest(const std::filesystem::path& out_dir);
 
 struct OutputDirOptions {
   /// The command's own inputs (files or directories). The output may be neither inside nor above
