@@ -1,6 +1,7 @@
 // Cohorts (`organsmith cohort`): validation of the cohort file, the local pool and a real Slurm
 // cluster giving the same studies byte for byte, a broken study that stops nothing, reuse on a
-// rerun, a study killed mid-run, and no input path in anything a cohort shows.
+// rerun, a study killed mid-run, the Slurm controller stopped mid-cohort, a disk that fills, and
+// no input path in anything a cohort shows.
 #include "tests/support/test_support.h"
 
 #include "core/csv.h"
