@@ -1,8 +1,9 @@
 // Over 400 lines: the liver bed found in the CT (crop, smoothing, intensity survey, opening,
 // connected region, probes) and the dissection path (bed score from any source, smoothing over
 // the surface, the iso-line, its curve shortening along the surface, its checks) are one method in
-// two halves sharing the surface's vertex normals and score field. Its second user (the solver model's fixed liver bed) takes the
-// score through `liver_bed_score`, so the two agree on where the bed is.
+// two halves sharing the surface's vertex normals and score field. Its second user (the solver
+// model's fixed liver bed) takes the score through `liver_bed_score`, so the two agree on where the
+// bed is.
 #include "physics/haptics/dissection.h"
 
 #include "core/errors.h"
