@@ -65,6 +65,7 @@ bool is_builtin(const std::string& name) {
 
 struct GuideFlags {
   std::string out, path;
+  bool force = false;
   GuideStageOptions options;
 };
 
@@ -97,6 +98,7 @@ int run_guide(const GuideFlags& f) {
         g.dissection.bed_distance_mm = f.options.dissection.bed_distance_mm;
       RunOptions ro;
       ro.from = ro.until = "guide";
+      ro.force = f.force;
       NullProgress quiet;
       const RunSummary summary = run_case(*c, ro, quiet);
       for (const auto& o : summary.stages.back().outputs)
@@ -337,6 +339,7 @@ std::vector<Command> haptics_commands(CLI::App& app) {
   guide->add_option("out_dir", g->out, "output directory of `organsmith run`")->required();
   guide->add_option("--path", g->path,
                     "one path: trachea_centerline, trachea_incision, gallbladder_dissection, or a CSV/JSON file");
+  guide->add_flag("--force", g->force, "redo the stage even when it is unchanged since the last run");
   guide->add_option("--first-ring", g->options.incision.first_ring, "incision: first ring from the cranial end (default 3)")
       ->check(CLI::Range(1, 100));
   guide->add_option("--ring-count", g->options.incision.ring_count, "incision: rings spanned (default 4)")->check(CLI::Range(1, 100));

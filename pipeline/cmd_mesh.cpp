@@ -35,6 +35,7 @@ struct MeshFlags {
   double tet_edge_mm = -1.0;  // < 0 = not given: 4.5, or the run's [stages.mesh] tet_edge_mm
   std::string formats;   // empty = not given: all, or the run's formats
   bool ras = false;
+  bool force = false;  // `mesh DIR`: redo the stage even when unchanged
   std::vector<std::string> organs;  // NAME or NAME=LABEL
   double gallbladder_wall_mm = 0.0, trachea_wall_mm = 0.0;  // 0 = the organ registry's
   bool no_tets = false, allow_failures = false;
@@ -114,6 +115,7 @@ int continue_run(const MeshFlags& f) {
   }
   RunOptions ro;
   ro.from = "mesh";
+  ro.force = f.force;
   ro.until = "attach";
   TerminalProgress progress;
   const RunSummary summary = run_case(c, ro, progress);
@@ -220,6 +222,7 @@ std::vector<Command> meshing_commands(CLI::App& app) {
       ->check(CLI::Range(0.0, 20.0));
   sub->add_option("--formats", flags->formats, "comma-separated: stl,obj,ply,vtp,vtu,msh,msh22,inp,feb (default: all)");
   sub->add_flag("--ras", flags->ras, "write RAS coordinates instead of LPS");
+  sub->add_flag("--force", flags->force, "`mesh DIR`: " + std::string("redo the stage even when it is unchanged since the last run"));
   sub->add_option("--organ", flags->organs,
                   "organ to mesh, NAME or NAME=LABEL (default: gallbladder=1 trachea=2); gallbladder gets a wall and "
                   "a body, trachea a tube wall around its lumen, other names one solid body");

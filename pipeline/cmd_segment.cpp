@@ -33,6 +33,7 @@ struct SegmentFlags {
   std::vector<std::string> seeds;      // "X,Y,Z" LPS mm
   std::vector<std::string> seeds_ijk;  // "I,J,K"
   std::string presets;                 // TOML file overriding data/organs.toml
+  bool force = false;                  // redo the stages even when unchanged
   std::string name;                    // case name (titles, manifest); default: the output folder's name
   bool print_presets = false;
 };
@@ -120,6 +121,7 @@ int run_segment(const SegmentFlags& f) {
   if (!options.preset_overrides_toml.empty()) set_segment_presets(c, options.preset_overrides_toml, f.presets);
   RunOptions ro;
   ro.until = "segment";
+  ro.force = f.force;
   ro.all_or_nothing = true;
   TerminalProgress progress;
   const RunSummary summary = run_case(c, ro, progress);
@@ -144,6 +146,7 @@ std::vector<Command> segmentation_commands(CLI::App& app) {
       "and DIR/manifest.json. `organsmith mesh DIR`, `guide DIR` and `snapshot DIR` continue from there.");
   sub->add_option("INPUT", flags->input, "DICOM directory or file, or .nii/.nii.gz/.nrrd/.mha (required)");
   sub->add_option("--out", flags->out, "output directory: new, empty, or one organsmith wrote before (its earlier outputs are replaced; other files are never touched) (required)");
+  sub->add_flag("--force", flags->force, "redo the stage even when it is unchanged since the last run");
   sub->add_option("--organ", flags->organs, "gallbladder or trachea; repeat for several organs (required)");
   sub->add_option("--seed", flags->seeds, "seed inside the organ, X,Y,Z in LPS mm; one per seeded --organ, in order")
       ->allow_extra_args(false);

@@ -25,6 +25,7 @@ struct SimulateArgs {
   int threads = -1;
   double timeout_s = -1;
   bool band = false;
+  bool force = false;
 };
 
 int cmd_simulate(const SimulateArgs& a) {
@@ -45,6 +46,7 @@ int cmd_simulate(const SimulateArgs& a) {
   if (a.band) c->stages.simulate.band = true;
   RunOptions ro;
   ro.from = "simulate";
+  ro.force = a.force;
   ro.until = "simulate";
   TerminalProgress progress;
   const RunSummary summary = run_case(*c, ro, progress);
@@ -87,6 +89,7 @@ std::vector<Command> simulate_commands(CLI::App& app) {
   cmd->add_option("--organ", a->organs, "organ to simulate (repeatable; default: every organ with a load case)");
   cmd->add_option("--solver", a->solver, "CalculiX executable (default: ccx on PATH, or $ORGANSMITH_CCX)");
   cmd->add_option("--threads", a->threads, "solver threads (default: the case's, 0 = every core)")->check(CLI::Range(0, 1024));
+  cmd->add_flag("--force", a->force, "redo the stage even when it is unchanged since the last run");
   cmd->add_flag("--band", a->band,
                 "also run the material band's P5/P50/P95 variants (written by `mesh DIR --material-band` or\n"
                 "[stages.mesh] material_band) and report the largest displacement as a band");

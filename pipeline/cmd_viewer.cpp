@@ -46,7 +46,7 @@ std::pair<int, int> parse_size(const std::string& s) {
 }
 
 int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& views, const std::string& size,
-                 const LoadFlags& flags) {
+                 const LoadFlags& flags, bool force) {
   SnapshotOptions options;
   if (!size.empty()) std::tie(options.width_px, options.height_px) = parse_size(size);
   if (!views.empty()) {
@@ -68,6 +68,7 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
       if (!size.empty()) std::tie(c->stages.snapshot.width_px, c->stages.snapshot.height_px) = parse_size(size);
       RunOptions ro;
       ro.from = "snapshot";
+      ro.force = force;
       TerminalProgress progress;
       const RunSummary summary = run_case(*c, ro, progress);
       progress.finish();
@@ -233,6 +234,7 @@ std::vector<Command> viewer_commands(CLI::App& app) {
     std::string out, size;
     std::vector<std::string> views;
     LoadFlags load;
+    bool force = false;
   };
   auto sa = std::make_shared<SnapshotArgs>();
   auto* snap = app.add_subcommand(
@@ -242,6 +244,7 @@ std::vector<Command> viewer_commands(CLI::App& app) {
       "outline, tetrahedral cuts coloured by quality, plots of the calibrated tissue laws, Monte Carlo\n"
       "CDFs and calibration fits. Needs no display (starts a private Xvfb).");
   snap->add_option("OUT_DIR", sa->out, "output directory of `organsmith run`")->required();
+  snap->add_flag("--force", sa->force, "redo the stage even when it is unchanged since the last run");
   snap->add_option("--views", sa->views, "views to render: organs overview slices tets plots (default: all)")
       ->delimiter(',');
   snap->add_option("--size", sa->size, "PNG size WIDTHxHEIGHT (default 1024x768)");
@@ -252,7 +255,7 @@ std::vector<Command> viewer_commands(CLI::App& app) {
       ->check(CLI::ExistingDirectory);
   snap->add_option("--labels", sa->load.labels,
                    "label map to outline (default: OUT_DIR/labels.nii.gz, else the phantom's ground truth)");
-  commands.push_back({snap, [sa] { return cmd_snapshot(sa->out, sa->views, sa->size, sa->load); }});
+  commands.push_back({snap, [sa] { return cmd_snapshot(sa->out, sa->views, sa->size, sa->load, sa->force); }});
 
   auto pa = std::make_shared<PreviewFlags>();
   auto* prev = app.add_subcommand(

@@ -63,6 +63,14 @@ TEST(CliParity, SegmentMeshGuideSnapshotWriteWhatRunWrites) {
     EXPECT_EQ(db.at(path), sha) << path << " differs";
   }
   for (const auto& [path, _] : db) EXPECT_TRUE(da.count(path)) << path << " written by the commands only";
+
+  // A single-stage command skips its unchanged stage and says how to redo it; --force redoes it,
+  // to the same bytes.
+  ASSERT_EQ(run_cli("guide " + quoted(b), &log), 0) << log;
+  EXPECT_NE(log.find("stage guide: unchanged since the last run, skipped (--force to redo)"), std::string::npos) << log;
+  ASSERT_EQ(run_cli("guide " + quoted(b) + " --force", &log), 0) << log;
+  EXPECT_NE(log.find("stage guide: running"), std::string::npos) << log;
+  EXPECT_EQ(file_digests(b / "paths"), file_digests(a / "paths"));
 }
 
 namespace {
