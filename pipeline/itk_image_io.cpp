@@ -64,6 +64,21 @@ void write_itk(const std::string& path, const PlainGrid& g, const Pixel* data) {
   }
 }
 
+/// `image`'s size, spacing, origin and direction into `g`; returns its voxel count.
+template <typename ImageT>
+std::size_t grid_of(const ImageT* image, PlainGrid& g) {
+  const auto size = image->GetLargestPossibleRegion().GetSize();
+  std::size_t n = 1;
+  for (int a = 0; a < 3; ++a) {
+    g.size[a] = std::int64_t(size[a]);
+    g.spacing[a] = image->GetSpacing()[a];
+    g.origin[a] = image->GetOrigin()[a];
+    for (int b = 0; b < 3; ++b) g.direction[3 * a + b] = image->GetDirection()(a, b);
+    n *= size[a];
+  }
+  return n;
+}
+
 }  // namespace
 
 void read_float(const std::string& path, PlainGrid& g, const std::function<float*(std::size_t)>& allocate) {
@@ -81,15 +96,7 @@ void read_float(const std::string& path, PlainGrid& g, const std::function<float
                      "give a readable NIfTI, NRRD or MetaImage file, or a DICOM directory");
   }
   const ImageT* image = reader->GetOutput();
-  const auto size = image->GetLargestPossibleRegion().GetSize();
-  std::size_t n = 1;
-  for (int a = 0; a < 3; ++a) {
-    g.size[a] = std::int64_t(size[a]);
-    g.spacing[a] = image->GetSpacing()[a];
-    g.origin[a] = image->GetOrigin()[a];
-    for (int b = 0; b < 3; ++b) g.direction[3 * a + b] = image->GetDirection()(a, b);
-    n *= size[a];
-  }
+  const std::size_t n = grid_of(image, g);
   std::copy(image->GetBufferPointer(), image->GetBufferPointer() + n, allocate(n));
 }
 
@@ -104,14 +111,7 @@ void read_grid(const std::string& path, PlainGrid& g) {
     throw InputError(ExitCode::unsupported_input, std::string("cannot read the image's header: ") + e.GetDescription(),
                      path, "give a readable NIfTI, NRRD or MetaImage file");
   }
-  const ImageT* image = reader->GetOutput();
-  const auto size = image->GetLargestPossibleRegion().GetSize();
-  for (int a = 0; a < 3; ++a) {
-    g.size[a] = std::int64_t(size[a]);
-    g.spacing[a] = image->GetSpacing()[a];
-    g.origin[a] = image->GetOrigin()[a];
-    for (int b = 0; b < 3; ++b) g.direction[3 * a + b] = image->GetDirection()(a, b);
-  }
+  grid_of(reader->GetOutput(), g);
 }
 
 void write_float(const std::string& path, const PlainGrid& grid, const float* values) {

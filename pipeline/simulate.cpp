@@ -9,6 +9,7 @@
 #include "core/grid.h"
 #include "core/process.h"
 #include "meshing/export.h"
+#include "physics/materials/solver_fit.h"
 
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>
@@ -220,9 +221,8 @@ SolverInput read_solver_inp(const fs::path& path) {
     }
     // A law the solver cannot hold (a sign flipped, a constant lost): refused here, not left to
     // CalculiX, which would stall and have the mesh blamed. Needed: a positive initial shear modulus,
-    // a finite positive bulk modulus, and a uniaxial stress rising with stretch from 0.8 to 1.3
-    // (Drucker stability where organsmith's laws are calibrated; nominal stress of the Abaqus form
-    // P(λ) = Σ 2μ/α (λ^(α−1) − λ^(−α/2−1)), its slope below).
+    // a finite positive bulk modulus, and a uniaxial nominal stress rising with stretch from 0.8 to
+    // 1.3 (Drucker stability where organsmith's laws are calibrated).
     const std::string hint = "the material block of the INP is not one organsmith wrote; write it again with "
                              "`organsmith mesh` or fix the constants";
     if (!(law.initial_shear() > 0))
@@ -233,15 +233,12 @@ SolverInput read_solver_inp(const fs::path& path) {
     if (!(law.bulk > 0) || !std::isfinite(law.bulk))
       throw InputError(ExitCode::unsupported_input,
                        "material " + mat + ": D1 must be positive (a finite bulk modulus K = 2/D1)", path, hint);
-    for (int k = 0; k <= 50; ++k) {
+    SolverMaterial form;
+    form.ogden_mu_Pa = law.mu;  // the file's units: only the sign of the slope matters here
+    form.ogden_alpha = law.alpha;
+    for (int k = 0; k < 50; ++k) {
       const double l = 0.8 + 0.5 * k / 50.0;
-      double slope = 0;
-      for (std::size_t t = 0; t < law.mu.size(); ++t) {
-        const double a = law.alpha[t];
-        if (a == 0) continue;
-        slope += 2 * law.mu[t] / a * ((a - 1) * std::pow(l, a - 2) + (a / 2 + 1) * std::pow(l, -a / 2 - 2));
-      }
-      if (!(slope > 0))
+      if (!(physics::ogden_nominal_Pa(form, l + 0.01, false) > physics::ogden_nominal_Pa(form, l, false)))
         throw InputError(ExitCode::unsupported_input,
                          "material " + mat + ": the law is unstable (its uniaxial stress falls at stretch " +
                              format_g(l, 3) + ")",

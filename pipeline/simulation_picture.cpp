@@ -13,6 +13,16 @@ namespace organsmith {
 
 namespace {
 
+/// One off-screen picture of `scene` at the given size.
+void render_png(const SnapshotScene& scene, const std::string& view, int width_px, int height_px,
+                const std::filesystem::path& png) {
+  SnapshotOptions so;
+  so.width_px = width_px;
+  so.height_px = height_px;
+  SnapshotRenderer renderer(so);
+  renderer.render_to_png(scene, view, png);
+}
+
 /// Corner faces of tetrahedra, keyed by their sorted nodes: how many elements share each, and its
 /// outward node order (from the last element that named it; a boundary face has one).
 class BoundaryFaces {
@@ -51,11 +61,7 @@ class BoundaryFaces {
     const std::string view = "simulation_" + d.organ;
     SnapshotScene scene;
     scene.deformations.push_back(std::move(d));
-    SnapshotOptions so;
-    so.width_px = width_px;
-    so.height_px = height_px;
-    SnapshotRenderer renderer(so);
-    renderer.render_to_png(scene, view, png);
+    render_png(scene, view, width_px, height_px, png);
   }
 
  private:
@@ -164,11 +170,7 @@ void draw_indentation_plot(const Simulation& sim, const std::vector<std::array<d
   }
   SnapshotScene scene;
   scene.plots.push_back(std::move(plot));
-  SnapshotOptions so;
-  so.width_px = width_px;
-  so.height_px = height_px;
-  SnapshotRenderer renderer(so);
-  renderer.render_to_png(scene, "plot_indentation_" + sim.result.organ, png);
+  render_png(scene, "plot_indentation_" + sim.result.organ, width_px, height_px, png);
 }
 
 }  // namespace organsmith

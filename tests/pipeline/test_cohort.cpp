@@ -24,18 +24,19 @@ namespace {
 /// may repeat.
 constexpr const char* kPatientFolder = "Doe_Jane_1957";
 
+/// The shared case of every cohort here: a 64² phantom with 10 mm slices, the gallbladder only
+/// (the engines are what these tests check; its trachea spends a minute in the mesh remedies).
+constexpr const char* kSmallCase =
+    "[case]\ninput = \"phantom\"\n[phantom]\nsize = 64\nslice_mm = 10\n[[organ]]\nname = \"gallbladder\"\n";
+
 void write(const fs::path& p, const std::string& text) {
   fs::create_directories(p.parent_path());
   std::ofstream(p) << text;
 }
 
-/// Three small phantoms (seeds 1–3) and a study whose input is not DICOM. The gallbladder only:
-/// the engines are what these tests check (a 64² phantom's 10 mm-slice trachea spends a minute in
-/// the mesh stage's remedies).
+/// Three small phantoms (seeds 1–3) and a study whose input is not DICOM.
 void write_cohort(const fs::path& dir) {
-  write(dir / "shared.toml",
-        "[case]\ninput = \"phantom\"\n[phantom]\nsize = 64\nslice_mm = 10\n"
-        "[[organ]]\nname = \"gallbladder\"\n");
+  write(dir / "shared.toml", kSmallCase);
   write(dir / kPatientFolder / "IM0001.dcm", "this is not a DICOM file\n");
   write(dir / "cohort.csv",
         std::string("id,input,phantom.seed\ns1,phantom,1\ns2,phantom,2\nbroken,") + kPatientFolder + ",\ns3,phantom,3\n");
@@ -87,8 +88,7 @@ class SlurmCluster {
   }
   ~SlurmCluster() {
     if (dir_.empty()) return;
-    const std::string script = std::string(ORGANSMITH_SOURCE_DIR) + "/tests/support/slurm_cluster.sh";
-    (void)std::system(("'" + script + "' stop '" + dir_.string() + "' > /dev/null 2>&1").c_str());
+    (void)command("stop", "/dev/null");
     unsetenv("SLURM_CONF");
     std::error_code ec;
     fs::remove_all(dir_, ec);
@@ -106,6 +106,13 @@ class SlurmCluster {
     return false;
   }
   fs::path dir() const { return dir_; }
+  /// `slurm_cluster.sh WHAT DIR` (stop-controller, start-controller, stop), its output appended
+  /// to `log`; the script's exit code.
+  int command(const std::string& what, const fs::path& log) const {
+    const std::string script = std::string(ORGANSMITH_SOURCE_DIR) + "/tests/support/slurm_cluster.sh";
+    const int rc = std::system(("'" + script + "' " + what + " '" + dir_.string() + "' >> '" + log.string() + "' 2>&1").c_str());
+    return WIFEXITED(rc) ? WEXITSTATUS(rc) : -1;
+  }
 
  private:
   fs::path dir_;
@@ -245,8 +252,7 @@ TEST(Cohort, LocalAndSlurmRunTheSameStudiesAndABrokenOneStopsNothing) {
 
 TEST(Cohort, AStudyKilledMidRunIsCompletedByTheRerun) {
   ScratchDir tmp("cohort-kill");
-  write(tmp / "shared.toml",
-        "[case]\ninput = \"phantom\"\n[phantom]\nsize = 64\nslice_mm = 10\n[[organ]]\nname = \"gallbladder\"\n");
+  write(tmp / "shared.toml", kSmallCase);
   write(tmp / "cohort.csv", "id,input,phantom.seed\nk1,phantom,1\n");
   const fs::path out = tmp / "out";
   const std::string args = "cohort " + quoted(tmp / "cohort.csv") + " --case " + quoted(tmp / "shared.toml") +
@@ -289,18 +295,13 @@ TEST(Cohort, AControllerStoppedMidCohortIsExit81AndTheRerunRunsNoStudyTwice) {
   if (cluster.missing_tools()) GTEST_SKIP() << "Slurm is not installed (scripts/install-deps installs slurm-wlm, munge)";
   ASSERT_TRUE(cluster.up()) << cluster.start_log();
   ScratchDir tmp("cohort-ctld");
-  write(tmp / "shared.toml",
-        "[case]\ninput = \"phantom\"\n[phantom]\nsize = 64\nslice_mm = 10\n[[organ]]\nname = \"gallbladder\"\n");
+  write(tmp / "shared.toml", kSmallCase);
   write(tmp / "cohort.csv", "id,input,phantom.seed\nc1,phantom,1\nc2,phantom,2\nc3,phantom,3\n");
   const fs::path out = tmp / "out";
   // One study at a time, so that the later ones wait in the queue while the controller is away.
   const std::string args = "cohort " + quoted(tmp / "cohort.csv") + " --case " + quoted(tmp / "shared.toml") +
                            " --engine slurm --jobs 1 --poll-s 0.2 --out " + quoted(out);
-  const std::string script = std::string(ORGANSMITH_SOURCE_DIR) + "/tests/support/slurm_cluster.sh";
-  auto controller = [&](const char* what) {
-    return std::system(("'" + script + "' " + what + " '" + cluster.dir().string() + "' >> '" +
-                        (tmp / "controller.log").string() + "' 2>&1").c_str());
-  };
+  auto controller = [&](const char* what) { return cluster.command(what, tmp / "controller.log"); };
 
   // The controller stops while the first study runs: the cohort waits 3 s for it, then exit 81.
   std::thread stopper([&] {
@@ -345,8 +346,7 @@ TEST(Cohort, AFullDiskFailsItsStudiesWithExit30AndTheRerunCompletesThem) {
   organsmith::testing::SmallDisk disk("cohortdisk", 32 * 1024);
   if (!disk.mounted()) GTEST_SKIP() << disk.why();
   ScratchDir tmp("cohort-disk");
-  write(tmp / "shared.toml",
-        "[case]\ninput = \"phantom\"\n[phantom]\nsize = 64\nslice_mm = 10\n[[organ]]\nname = \"gallbladder\"\n");
+  write(tmp / "shared.toml", kSmallCase);
   write(tmp / "cohort.csv", "id,input,phantom.seed\nf1,phantom,1\nf2,phantom,2\n");
   const fs::path out = disk / "out";
   const std::string args = "cohort " + quoted(tmp / "cohort.csv") + " --case " + quoted(tmp / "shared.toml") +

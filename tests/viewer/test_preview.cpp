@@ -1,3 +1,5 @@
+// Over 400 lines: every preview test drives the same real window under one private Xvfb (the
+// process, window and key helpers they share live here, beside the tests that use them).
 // The interactive preview under a private Xvfb: real X input events (XTest) move the tool and
 // switch the mode; screenshots of the window show that the tool moved and the label changed.
 
