@@ -7,7 +7,7 @@
 #include "physics/materials/presets.h"
 #include "physics/materials/material_band.h"
 #include "physics/materials/solver_fit.h"
-#include "pipeline/output_dir.h"
+#include "pipeline/read_manifest.h"
 #include "pipeline/stage_options.h"
 #include "segmentation/presets.h"
 

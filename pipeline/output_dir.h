@@ -3,6 +3,8 @@
 // or delete under `--out`. Its manifest.json lists, per stage, every file organsmith wrote there;
 // only those files are ever replaced or removed. A file organsmith did not write is never touched.
 
+#include "pipeline/read_manifest.h"
+
 #include <nlohmann/json.hpp>
 
 #include <filesystem>
@@ -15,10 +17,6 @@ namespace organsmith {
 
 /// A fresh staging directory next to `final_path` (same file system, so renames are atomic).
 std::filesystem::path make_staging_dir(const std::filesystem::path& final_path);
-
-/// The manifest of the output directory `out_dir` (OutputLayout::manifest()), parsed: nothing when
-/// it is absent, unreadable or not a JSON object. The one reader of another run's manifest.
-std::optional<nlohmann::json> read_manifest(const std::filesystem::path& out_dir);
 
 struct OutputDirOptions {
   /// The command's own inputs (files or directories). The output may be neither inside nor above
