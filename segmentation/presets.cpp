@@ -135,8 +135,29 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get(*t, organ, seen, "point_spacing_mm", p.point_spacing_mm);
     get(*t, organ, seen, "gvf_mu", p.gvf_mu);
     get(*t, organ, seen, "max_iterations", p.max_iterations);
+    get(*t, organ, seen, "surface3d", p.surface3d);
+    get(*t, organ, seen, "surface3d_max_grow_mm", p.surface3d_max_grow_mm);
+    get(*t, organ, seen, "surface3d_curvature_mm", p.surface3d_curvature_mm);
+    get(*t, organ, seen, "surface3d_gvf_weight", p.surface3d_gvf_weight);
+    get(*t, organ, seen, "surface3d_edge_stop_hu_per_mm", p.surface3d_edge_stop_hu_per_mm);
+    get(*t, organ, seen, "surface3d_max_steps", p.surface3d_max_steps);
+    get(*t, organ, seen, "surface3d_local_radius_mm", p.surface3d_local_radius_mm);
+    get(*t, organ, seen, "surface3d_min_contrast_hu", p.surface3d_min_contrast_hu);
+    get(*t, organ, seen, "surface3d_contrast_curvature_hu", p.surface3d_contrast_curvature_hu);
+    get(*t, organ, seen, "surface3d_open_start_mm", p.surface3d_open_start_mm);
     if (p.point_spacing_mm <= 0 || p.gvf_mu <= 0 || p.max_iterations < 1 || p.pressure_ramp_hu <= 0)
       throw CaseFileError("organ preset '" + organ + "': point_spacing_mm, gvf_mu, pressure_ramp_hu and max_iterations must be positive", {});
+    if (!(p.surface3d_max_grow_mm >= 0 && p.surface3d_max_grow_mm <= 200) || !(p.surface3d_curvature_mm >= 0 && p.surface3d_curvature_mm <= 20) ||
+        !(p.surface3d_gvf_weight >= 0 && p.surface3d_gvf_weight <= 10) || p.surface3d_max_steps < 1 || p.surface3d_max_steps > 100000 ||
+        !(p.surface3d_edge_stop_hu_per_mm >= 0 && p.surface3d_edge_stop_hu_per_mm <= 1000) ||
+        !(p.surface3d_local_radius_mm >= 0 && p.surface3d_local_radius_mm <= 50) ||
+        !(p.surface3d_min_contrast_hu > 0 && p.surface3d_min_contrast_hu <= 1000) ||
+        !(p.surface3d_contrast_curvature_hu >= 0 && p.surface3d_contrast_curvature_hu <= 1000) ||
+        !(p.surface3d_open_start_mm >= 0 && p.surface3d_open_start_mm <= 50))
+      throw CaseFileError("organ preset '" + organ + "': surface3d_max_grow_mm must be 0–200, surface3d_curvature_mm 0–20, "
+                          "surface3d_gvf_weight 0–10, surface3d_edge_stop_hu_per_mm 0–1000, surface3d_max_steps 1–100000, "
+                          "surface3d_local_radius_mm and surface3d_open_start_mm 0–50, "
+                          "surface3d_min_contrast_hu above 0 and surface3d_contrast_curvature_hu 0–1000 (HU)", {});
     // A misspelt key would otherwise fall back to the default without a word.
     for (auto&& [key, value] : *t)
       if (!seen.count(key.str()))

@@ -80,6 +80,18 @@ struct OrganPreset {
   double point_spacing_mm = 1.5;
   double gvf_mu = 0.2;
   int max_iterations = 300;
+  /// Seeded organs: a 3-D GVF surface (segmentation/surface3d.h) evolved from the slices' result;
+  /// false = the slices' result is the label.
+  bool surface3d = false;
+  double surface3d_max_grow_mm = 10;   ///< …farthest a point may lie from the slices' result and join, mm
+  double surface3d_curvature_mm = 1;   ///< …ε of the curvature term, mm
+  double surface3d_gvf_weight = 0.5;   ///< …weight of the GVF term against the region term (1)
+  double surface3d_edge_stop_hu_per_mm = 10;  ///< …HU gradient at which the outward push halves, HU/mm (0 = off)
+  int surface3d_max_steps = 600;       ///< …evolution steps at most
+  double surface3d_local_radius_mm = 6;   ///< …half-size of the local inside/outside statistics' window, mm (0 = window only)
+  double surface3d_min_contrast_hu = 10;  ///< …inside/outside contrast below which the region speed fades, HU
+  double surface3d_contrast_curvature_hu = 0;  ///< …contrast at which the curvature weight halves, HU (0 = weight 1)
+  double surface3d_open_start_mm = 0;     ///< …only the slices' result opened by a ball this wide is kept whatever the image says, mm
 };
 
 /// The embedded data/organs.toml (the organ registry; each organ's preset is its `segment` table).

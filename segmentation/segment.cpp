@@ -8,6 +8,7 @@
 #include "segmentation/region3d.h"
 #include "segmentation/slice_ops.h"
 #include "segmentation/snake.h"
+#include "segmentation/surface3d.h"
 
 #include <nlohmann/json.hpp>
 #include <opencv2/core.hpp>
@@ -818,6 +819,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   std::snprintf(win, sizeof win, "organ window %.0f to %.0f HU (median %.0f HU); noise %.0f HU, region smoothing %.2f px",
                 lo, hi, mu, noise_hu, region_sigma_mm(p, c) / std::min(c.sx, c.sy));
   out.notes = {"towards k = 0: " + note_down, "towards k = " + std::to_string(K - 1) + ": " + note_up, win};
+  out.window_lo_hu = lo, out.window_hi_hu = hi, out.region_sigma_mm = region_sigma_mm(p, c);
   if (!at.held.empty()) {
     std::string ks;
     for (const auto k : at.held) ks += (ks.empty() ? "" : ", ") + std::to_string(k);
@@ -1149,6 +1151,53 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
   return out;
 }
 
+/// The 3-D GVF surface from the slices' result of a seeded organ (presets surface3d*): its label
+/// replaces the slices' (never over another organ's voxels), and each slice's contour becomes the
+/// outline of the largest section of the surface there. Returns the organ's voxel count.
+std::int64_t surface_from_slices(const Volume& vol, const OrganPreset& p, OrganSegmentation& o, LabelMap& labels,
+                                 bool parallel) {
+  std::vector<std::uint8_t> start(labels.labels.size());
+  for (std::size_t q = 0; q < start.size(); ++q) start[q] = labels.labels[q] == o.label;
+  seg::Surface3dOptions so;
+  so.lo_hu = o.window_lo_hu, so.hi_hu = o.window_hi_hu, so.ramp_hu = p.pressure_ramp_hu;
+  so.region_sigma_mm = o.region_sigma_mm;
+  so.edge_lo_hu = p.edge_window_lo_hu, so.edge_hi_hu = p.edge_window_hi_hu, so.edge_sigma_mm = p.edge_sigma_mm;
+  so.gvf_mu = p.gvf_mu;
+  so.gvf_weight = p.surface3d_gvf_weight, so.curvature_mm = p.surface3d_curvature_mm;
+  so.max_grow_mm = p.surface3d_max_grow_mm, so.max_steps = p.surface3d_max_steps;
+  so.edge_stop_hu_per_mm = p.surface3d_edge_stop_hu_per_mm;
+  so.local_radius_mm = p.surface3d_local_radius_mm, so.min_contrast_hu = p.surface3d_min_contrast_hu;
+  so.contrast_curvature_hu = p.surface3d_contrast_curvature_hu;
+  so.open_start_mm = p.surface3d_open_start_mm;
+  so.parallel = parallel;
+  const seg::Surface3dResult r = seg::evolve_surface3d(vol, start, so);
+  std::int64_t n = 0;
+  for (std::size_t q = 0; q < start.size(); ++q) {
+    if (start[q]) labels.labels[q] = 0;
+    if (r.mask[q] && labels.labels[q] == 0) labels.labels[q] = o.label, ++n;
+  }
+  const auto& g = vol.grid;
+  const int W = int(g.size_vox[0]), H = int(g.size_vox[1]);
+  o.contours.contours.clear();
+  for (std::int64_t k = r.first_k; k <= r.last_k; ++k) {
+    cv::Mat m(H, W, CV_8U, cv::Scalar(0));
+    const std::uint8_t* sl = labels.labels.data() + k * g.slice_voxel_count();
+    bool any = false;
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x)
+        if (sl[std::size_t(y) * W + x] == o.label) m.at<std::uint8_t>(y, x) = 255, any = true;
+    if (!any) continue;
+    const auto pts = seg::mask_outline_mm(m, 0.0, 0.0, g.spacing_mm.x(), g.spacing_mm.y());
+    if (pts.size() >= 3) o.contours.contours.push_back(to_contour(vol, k, pts));
+  }
+  if (!o.contours.contours.empty()) {
+    o.first_slice = o.contours.contours.front().slice_k;
+    o.last_slice = o.contours.contours.back().slice_k;
+  }
+  o.notes.push_back(r.note);
+  return n;
+}
+
 }  // namespace
 
 SegmentationResult segment_organs(const Volume& volume, const std::vector<OrganRequest>& organs,
@@ -1203,6 +1252,8 @@ SegmentationResult segment_organs(const Volume& volume, const std::vector<OrganR
     if (n == 0)
       throw SegmentationError(ExitCode::organ_not_found, o.organ + ": the contours enclose no voxel",
                               "check the seed and the organ presets");
+    const OrganPreset& p = presets.at(o.organ);
+    if (p.surface3d && o.window_hi_hu > o.window_lo_hu) n = surface_from_slices(volume, p, o, res.labels, options.parallel);
     o.volume_ml = double(n) * volume.grid.spacing_mm.prod() / 1000.0;
   }
   progress.report(1.0, "segmentation done");

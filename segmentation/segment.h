@@ -47,6 +47,9 @@ struct OrganSegmentation {
   double volume_ml = 0;            ///< voxels carrying `label`
   std::optional<Eigen::Vector3d> seed_lps_mm;  ///< the seed used (given, or found for the trachea)
   std::vector<std::string> notes;  ///< why propagation stopped at each end, etc.
+  /// Seeded organs: the HU window and region smoothing the slices settled on (the 3-D surface's
+  /// region term uses them); 0/0 for organs found otherwise.
+  double window_lo_hu = 0, window_hi_hu = 0, region_sigma_mm = 0;
 };
 
 struct SegmentationResult {

@@ -478,8 +478,8 @@ Eigen::Vector3d nearest_on_loop(const std::vector<Eigen::Vector3d>& q, const Eig
 }
 
 /// Curve-shortening on the surface: Laplacian passes over a closed polyline, each point then held
-/// within o.surface_tolerance_mm of the surface, until no turn exceeds o.max_turn_deg_per_mm (at
-/// most 400 passes). Shortening straightens the loop along the surface (its geodesic curvature
+/// within o.surface_tolerance_mm of the surface, until no turn exceeds o.max_turn_deg_per_mm and
+/// the total turning is within o.max_total_turning_deg (at most 400 passes). Shortening straightens the loop along the surface (its geodesic curvature
 /// falls): it stops as soon as the sharpest turn is within the limit, so the loop keeps to the
 /// rim (the drift is reported). Returns the passes taken.
 std::size_t smooth_on_surface(std::vector<Eigen::Vector3d>& p, const SurfaceIndex& index, const DissectionOptions& o) {
@@ -493,7 +493,11 @@ std::size_t smooth_on_surface(std::vector<Eigen::Vector3d>& p, const SurfaceInde
     for (std::size_t i = 0; i < p.size(); ++i) length += (p[(i + 1) % p.size()] - p[i]).norm();
     return std::max(o.max_turn_deg_per_mm, 2 * 360.0 / std::max(length, 1e-9));
   };
-  while (passes < 400 && turning(p).second > limit()) {
+  auto rough = [&] {
+    const auto t = turning(p);
+    return t.second > limit() || t.first > o.max_total_turning_deg;
+  };
+  while (passes < 400 && rough()) {
     if (passes % 10 == 0 && passes > 0) {  // shortening bunches the points: even them out
       Polyline loop;
       loop.closed = true;

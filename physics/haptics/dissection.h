@@ -83,6 +83,9 @@ struct DissectionOptions {
   /// The path is smoothed along the surface until no turn exceeds this, degrees per mm of path
   /// (default 15: a hand following it turns at most a quarter circle over 6 mm).
   double max_turn_deg_per_mm = 15.0;
+  /// …and until its total turning is at most this, degrees (default 720: a hand following the
+  /// rim goes once around the bed; a loop that winds more is noise of the bed's edge).
+  double max_total_turning_deg = 720.0;
   /// How far the smoothed path may leave the (faceted) surface, mm (default 0.5: below the
   /// facets' own deviation from the organ at a 2–3 mm edge).
   double surface_tolerance_mm = 0.5;

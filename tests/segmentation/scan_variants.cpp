@@ -1,5 +1,7 @@
 #include "scan_variants.h"
 
+#include <cstdlib>
+
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 
@@ -312,6 +314,12 @@ LabelMap air_under_reference(const Scan& s, float air_hu) {
     }
   }
   return m;
+}
+
+SegmentOptions sweep_segment_options() {
+  SegmentOptions o;
+  if (const char* t = std::getenv("ORGANSMITH_SWEEP_PRESETS")) o.preset_overrides_toml = t;
+  return o;
 }
 
 }  // namespace organsmith::testing

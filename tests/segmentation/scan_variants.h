@@ -5,6 +5,7 @@
 // voxels; storage changes (RAS order, sagittal slices) keep every voxel at its LPS position.
 
 #include "core/volume.h"
+#include "segmentation/segment.h"
 
 #include <Eigen/Core>
 
@@ -66,5 +67,10 @@ Score score_against(const LabelMap& ref, const LabelMap& test, std::uint8_t test
 /// a scan whose reference was drawn at that level this is the reference itself; on resampled
 /// slices it measures how far the interpolated CT and the interpolated reference disagree.
 LabelMap air_under_reference(const Scan& s, float air_hu);
+
+/// The segmentation options the sweeps use: the defaults, with ORGANSMITH_SWEEP_PRESETS (TOML in
+/// the form of a case's [segmentation.presets], e.g. "[gallbladder]\nsurface3d = false") applied
+/// when set, to compare a preset against the defaults on the same sets without rebuilding.
+SegmentOptions sweep_segment_options();
 
 }  // namespace organsmith::testing

@@ -171,7 +171,7 @@ TEST(SegmentReal, GallbladderFromOneSeedAndFromSeedsMoved3mm) {
     }
   NullProgress np;
   for (const auto& s : seeds) {
-    const SegmentationResult r = segment_organs(v, {{"gallbladder", s, {}}}, {}, np);
+    const SegmentationResult r = segment_organs(v, {{"gallbladder", s, {}}}, organsmith::testing::sweep_segment_options(), np);
     const Score sc = score(ref, 0, r.labels, 1);
     std::printf("real gallbladder, seed (%.1f, %.1f, %.1f): Dice %.4f, volume error %+.1f %%\n", s.x(), s.y(), s.z(),
                 sc.dice, 100 * sc.volume_error);

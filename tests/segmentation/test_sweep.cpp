@@ -80,7 +80,7 @@ Row segment_and_score(const std::string& name, const Scan& raw, const std::strin
   try {
     OrganRequest req{organ, {}, {}};
     if (seeded) req.seed_lps_mm = s.seed_lps_mm;
-    const SegmentationResult r = segment_organs(s.ct, {req}, {}, np);
+    const SegmentationResult r = segment_organs(s.ct, {req}, sweep_segment_options(), np);
     row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     const Score sc = score_against(s.ref, r.labels, r.organs[0].label);
     // To look at a variant: ORGANSMITH_SWEEP_DUMP=DIR keeps its CT, reference, segmentation and seed.
