@@ -310,7 +310,7 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
       for (int y = 0; y < b.ny; ++y)
         for (int x = 0; x < b.nx; ++x) {
           const Grad gr = central(es, b, x, y, z);
-          const double q = (gr.x * gr.x + gr.y * gr.y + gr.z * gr.z) / (o.edge_stop_hu_per_mm * o.edge_stop_hu_per_mm);
+          const double q = (gr.x * gr.x + gr.y * gr.y) / (o.edge_stop_hu_per_mm * o.edge_stop_hu_per_mm);
           float& r = R[b.at(x, y, z)];
           if (r > 0) r = float(r / (1 + q));
         }
