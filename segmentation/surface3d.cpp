@@ -415,7 +415,7 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
   // Reinitialisation towards a signed distance (Sussman, Smereka & Osher 1994; Godunov upwind),
   // keeping the zero level where it is.
   std::vector<float> tmp(n);
-  auto reinit = [&](int iters) {
+  auto reinit = [&](int iters, double within) {
     const std::vector<float> phi0 = phi;
     const double dtr = 0.5 * hmin;
     for (int it = 0; it < iters; ++it) {
@@ -423,6 +423,10 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
         for (int y = 0; y < b.ny; ++y)
           for (int x = 0; x < b.nx; ++x) {
             const std::size_t p = b.at(x, y, z);
+            if (std::abs(phi0[p]) > within) {
+              tmp[p] = phi[p];
+              continue;
+            }
             const double S = phi0[p] / std::sqrt(double(phi0[p]) * phi0[p] + hmin * hmin);
             double g2 = 0;
             auto axis = [&](double c, double m, double pl, double hh) {
@@ -440,7 +444,7 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
       phi.swap(tmp);
     }
   };
-  reinit(int(std::ceil(o.max_grow_mm / (0.5 * hmin))) + 4);
+  reinit(int(std::ceil(o.max_grow_mm / (0.5 * hmin))) + 4, std::numeric_limits<double>::infinity());
 
   // Region competition with local statistics (Chan & Vese's two-region energy over a window
   // around each point, as Lankton & Tannenbaum localise it): a point joins where its HU lies on
@@ -483,6 +487,7 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
   // curvature term's stable step shrinks with the pixel², so a count of steps would stop a slow
   // front on fine pixels too early).
   const int check_every = std::max(10, int(std::ceil(std::min(b.hx, b.hy) / dt)));
+  const double band_mm = 3 * std::max({b.hx, b.hy, b.nz > 1 ? b.hz : b.hx});
   std::int64_t last = count_inside(), stable_since = 0;
   int step = 0;
   for (; step < o.max_steps; ++step) {
@@ -491,6 +496,13 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
         for (int x = 0; x < b.nx; ++x) {
           const std::size_t p = b.at(x, y, z);
           const double c = phi[p];
+          // Narrow band: far from the surface φ only carries the distance (kept up by the
+          // reinitialisation over the whole box), and the zero level moves far less than the
+          // band between two reinitialisations.
+          if (std::abs(c) > band_mm) {
+            tmp[p] = float(c);
+            continue;
+          }
           const double xm = x > 0 ? phi[b.at(x - 1, y, z)] : c, xp = x < b.nx - 1 ? phi[b.at(x + 1, y, z)] : c;
           const double ym = y > 0 ? phi[b.at(x, y - 1, z)] : c, yp = y < b.ny - 1 ? phi[b.at(x, y + 1, z)] : c;
           const double zm = z > 0 ? phi[b.at(x, y, z - 1)] : c, zp = z < b.nz - 1 ? phi[b.at(x, y, z + 1)] : c;
@@ -534,7 +546,10 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
         }
     });
     phi.swap(tmp);
-    if ((step + 1) % 5 == 0) reinit(2), local_region();
+    // Every 5 steps the distance is restored near the surface, every 20 over the whole box (the
+    // zero level moves under a pixel in between); the local means change slowly with the surface.
+    if ((step + 1) % 20 == 0) reinit(2, std::numeric_limits<double>::infinity()), local_region();
+    else if ((step + 1) % 5 == 0) reinit(2, 2 * band_mm);
     if ((step + 1) % check_every == 0) {
       const std::int64_t now = count_inside();
       if (std::llabs(now - last) <= std::max<std::int64_t>(1, last / 2000)) {
@@ -564,13 +579,18 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
           res.last_k = std::max<std::int64_t>(res.last_k, b.k0 + z);
         }
   res.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  char note[240];
+  res.box_voxels = std::int64_t(n);
+  // An upper bound of the per-voxel arrays alive at once: ≈ 30 float arrays (HU, smoothed HU, R,
+  // F, w_c, φ and its copies, the limit, distances, the GVF's 10, the local sums' 8 with their
+  // box-filter copies) and 6 byte masks.
+  res.box_mib = double(n) * (4.0 * 30 + 6) / (1024.0 * 1024.0);
+  char note[300];
   std::snprintf(note, sizeof note,
-                "3-D surface: %lld → %lld voxels (%+.1f %%), slices %lld–%lld, %d steps%s, %.2f s",
+                "3-D surface: %lld → %lld voxels (%+.1f %%), slices %lld–%lld, %d steps%s, %.2f s, box %lld voxels (≤ %.0f MiB)",
                 static_cast<long long>(res.start_voxels), static_cast<long long>(res.voxels),
                 100.0 * double(res.voxels - res.start_voxels) / double(res.start_voxels),
                 static_cast<long long>(res.first_k), static_cast<long long>(res.last_k), res.steps,
-                res.converged ? "" : " (step limit)", res.seconds);
+                res.converged ? "" : " (step limit)", res.seconds, static_cast<long long>(res.box_voxels), res.box_mib);
   res.note = note;
   return res;
 }

@@ -67,6 +67,8 @@ struct Surface3dResult {
   std::int64_t start_voxels = 0, voxels = 0;
   std::int64_t first_k = 0, last_k = -1;  ///< slices the result spans
   double seconds = 0;
+  std::int64_t box_voxels = 0;     ///< voxels of the working box
+  double box_mib = 0;              ///< memory of the per-voxel arrays over the box, MiB
   std::string note;                ///< one line for segmentation.json
 };
 
