@@ -1,3 +1,6 @@
+// Over 400 lines: the surface's evolution and the grid tools only it uses (exact anisotropic
+// distance transform, separable Gaussian, running-sum box filter, topology clean-up) share the
+// working box and its indexing; split out, the tools would be a header of private helpers.
 #include "segmentation/surface3d.h"
 
 #include <tbb/parallel_for.h>
@@ -20,6 +23,14 @@ struct Box {
   std::size_t size() const { return std::size_t(nx) * ny * nz; }
   std::size_t at(int x, int y, int z) const { return (std::size_t(z) * ny + y) * nx + x; }
 };
+
+/// First element of line l along axis ax (0 = x, 1 = y, 2 = z) of an nx × ny × … grid, x fastest;
+/// len is the line's length.
+std::size_t line_start(int ax, std::size_t l, int nx, int ny, int len) {
+  if (ax == 0) return l * std::size_t(len);
+  if (ax == 1) return (l / std::size_t(nx)) * std::size_t(nx) * std::size_t(ny) + (l % std::size_t(nx));
+  return l;
+}
 
 template <class F>
 void for_slices(const Box& b, bool parallel, F&& f) {
@@ -89,10 +100,7 @@ void gaussian(std::vector<float>& a, const Box& b, double sigma_mm) {
     std::vector<float> out(a.size());
     tbb::parallel_for(std::size_t(0), lines, [&](std::size_t l) {
       // line l: its first element
-      std::size_t base;
-      if (ax == 0) base = l * std::size_t(len);
-      else if (ax == 1) base = (l / b.nx) * b.nx * b.ny + (l % b.nx);
-      else base = l;
+      const std::size_t base = line_start(ax, l, b.nx, b.ny, len);
       for (int p = 0; p < len; ++p) {
         double acc = 0;
         for (int t = -r; t <= r; ++t) acc += w[std::size_t(t + r)] * a[base + std::size_t(std::clamp(p + t, 0, len - 1)) * st];
@@ -114,10 +122,7 @@ std::vector<float> box_sum(const std::vector<float>& a, const Box& b, int rx, in
     if (rr <= 0 || len < 2) continue;
     const std::size_t lines = a.size() / std::size_t(len);
     tbb::parallel_for(std::size_t(0), lines, [&](std::size_t l) {
-      std::size_t base;
-      if (ax == 0) base = l * std::size_t(len);
-      else if (ax == 1) base = (l / b.nx) * b.nx * b.ny + (l % b.nx);
-      else base = l;
+      const std::size_t base = line_start(ax, l, b.nx, b.ny, len);
       double run = 0;
       for (int q = 0; q <= std::min(rr, len - 1); ++q) run += cur[base + std::size_t(q) * stride[ax]];
       for (int p = 0; p < len; ++p) {
@@ -230,10 +235,7 @@ std::vector<float> distance_sq_mm2(const std::vector<std::uint8_t>& feature, int
     const int len = dims[ax];
     const std::size_t lines = n / std::size_t(len);
     tbb::parallel_for(std::size_t(0), lines, [&](std::size_t l) {
-      std::size_t base;
-      if (ax == 0) base = l * std::size_t(len);
-      else if (ax == 1) base = (l / nx) * nx * ny + (l % nx);
-      else base = l;
+      const std::size_t base = line_start(ax, l, nx, ny, len);
       std::vector<float> f(static_cast<std::size_t>(len)), o(static_cast<std::size_t>(len));
       std::vector<int> v;
       std::vector<double> z;
