@@ -137,14 +137,16 @@ struct HapticsFlags {
   ContactOptions contact;
   std::vector<double> xi, bands, probe_lps;
   bool offline = false;
-  std::string indent, fe_elements = "quadratic", fe;
+  std::string indent, fe_elements, fe;
+  double press_speed_mm_per_s = IndentOptions{}.press_speed_mm_per_s;
 };
 
 int run_indent(const HapticsFlags& f) {
   const fs::path out = f.out;
   require_out_dir(out);
   IndentOptions o;
-  o.fe.quadratic = f.fe_elements == "quadratic";
+  o.fe.quadratic = f.fe_elements != "linear";
+  o.press_speed_mm_per_s = f.press_speed_mm_per_s;
   if (!f.probe_lps.empty()) {
     if (f.probe_lps.size() != 3) throw UsageError("--probe-lps takes three coordinates (LPS mm)", "e.g. --probe-lps -20,-35,-368");
     o.fe.probe_lps_mm = Eigen::Vector3d(f.probe_lps[0], f.probe_lps[1], f.probe_lps[2]);
@@ -160,10 +162,13 @@ int run_indent(const HapticsFlags& f) {
     std::cout << "; largest difference from CalculiX past 20 % of the depth "
               << 100 * r["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>() << " %";
   const auto& fe = r["fe"];
-  std::cout << "\nreal-time model (" << fe["nodes"] << " nodes): FE update p50 " << fe["update_ms_p50"].get<double>() << " ms, p99 "
-            << fe["update_ms_p99"].get<double>() << " ms; force loop " << fe["force_rate_hz"].get<double>() << " Hz, tick p99 "
-            << fe["force_tick_us_p99"].get<double>() << " us; at rest 1 s after the tool left: "
-            << 100 * fe["press"]["rest_fraction_of_depth"].get<double>() << " % of the depth";
+  std::cout << "\nreal-time model (" << fe["nodes"] << " nodes): equilibria " << fe["equilibrium_hz"].get<double>() << " Hz (p50 "
+            << fe["equilibrium_ms_p50"].get<double>() << " ms), display update p99 " << fe["update_ms_p99"].get<double>()
+            << " ms; force loop " << fe["force_rate_hz"].get<double>() << " Hz, tick p99 " << fe["force_tick_us_p99"].get<double>()
+            << " us; at rest 1 s after the tool left: " << 100 * fe["press"]["rest_fraction_of_depth"].get<double>() << " % of the depth";
+  if (fe["press"].contains("felt_curve_against_solver"))
+    std::cout << "\nforce felt at " << fe["press"]["speed_mm_per_s"].get<double>() << " mm/s against CalculiX past 20 % of the depth: "
+              << 100 * fe["press"]["felt_curve_against_solver"]["largest_relative_difference_past_20pct_depth"].get<double>() << " %";
   std::cout << "\nwrote " << f.report << "\n";
   return 0;
 }
@@ -226,7 +231,7 @@ int run_haptics(HapticsFlags f) {
   const OrganRegistry registry = registry_of_output(out);
   // The organ felt through its real-time finite-element model (default: the gallbladder where its
   // solver file exists); the others through their surfaces and laws.
-  std::unique_ptr<RealtimeOrgan> fe = fe_for_haptics(out, f.fe, f.contact.tool_radius_mm);
+  std::unique_ptr<RealtimeOrgan> fe = fe_for_haptics(out, f.fe, f.contact.tool_radius_mm, f.fe_elements == "quadratic");
   const std::string fe_organ = fe ? fe->fe.organ : "none";
   for (const OrganInfo& o : registry.organs) {
     if (o.haptic_surface.empty() || labels.count(o.label) == 0 || o.name == fe_organ) continue;
@@ -364,10 +369,13 @@ std::vector<Command> haptics_commands(CLI::App& app) {
                       "quasi-statically and write its force–depth curve beside CalculiX's (simulation/ORGAN.json)");
   haptics->add_option("--probe-lps", h->probe_lps, "--indent: probe point X,Y,Z (LPS mm), snapped to the free surface")->delimiter(',');
   haptics->add_option("--fe-elements", h->fe_elements,
-                      "--indent: the model the quasi-static curve is pressed on: quadratic (the solver's 10-node tets; default, "
-                      "CalculiX's answer) or linear (their corner nodes, the real-time model; stiffer). The real-time press "
-                      "always runs the linear model")
+                      "the organ's finite-element model: quadratic (the solver file's 10-node tets, CalculiX's answer; the "
+                      "default of --indent) or linear (their corner nodes: equilibria at the display rate, about twice as stiff; "
+                      "the default of --trajectory)")
       ->check(CLI::IsMember({"linear", "quadratic"}));
+  haptics->add_option("--press-speed", h->press_speed_mm_per_s,
+                      "--indent: the real-time press's speed, mm/s (default 0.5: quasi-static for the 10-node model on two cores)")
+      ->check(CLI::PositiveNumber);
   haptics->add_option("--mode", h->mode, "guidance (w1=1), mixed (0.5/0.5, default) or reaction (w2=1)")
       ->check(CLI::IsMember({"guidance", "mixed", "reaction"}));
   haptics->add_option("--out", h->report, "report JSON")->required();

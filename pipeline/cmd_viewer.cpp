@@ -102,7 +102,7 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
 }
 
 struct PreviewFlags {
-  std::string out, size, path, mode = "mixed", screenshot, fe;
+  std::string out, size, path, mode = "mixed", screenshot, fe, fe_elements = "linear";
   std::vector<double> start;
   double quit_after_s = 0;
   double rate_Hz = 1000.0;
@@ -170,9 +170,9 @@ int cmd_preview(const PreviewFlags& f) {
   std::vector<physics::StressTable> tables;
   std::string felt;
   // The organ felt and drawn through its real-time finite-element model (its solver file's mesh
-  // on the corner nodes, laws and fixed set): the one asked for, else the gallbladder where the
-  // mesh stage wrote it.
-  std::unique_ptr<RealtimeOrgan> fe = fe_for_haptics(out, f.fe, f.contact.tool_radius_mm);
+  // on the corner nodes by default, laws and fixed set): the one asked for, else the gallbladder
+  // where the mesh stage wrote it.
+  std::unique_ptr<RealtimeOrgan> fe = fe_for_haptics(out, f.fe, f.contact.tool_radius_mm, f.fe_elements == "quadratic");
   const std::string fe_organ = fe ? fe->fe.organ : "none";
   if (fe) {
     haptics.tissue = fe->tissue.get();
@@ -278,6 +278,11 @@ std::vector<Command> viewer_commands(CLI::App& app) {
   prev->add_option("--fe", pa->fe,
                    "organ felt and drawn through its real-time finite-element model (from meshes/<organ>/<organ>.inp); "
                    "none: every organ as a surface that dents (default: the gallbladder where its solver file exists)");
+  prev->add_option("--fe-elements", pa->fe_elements,
+                   "that model's elements: linear (the solver file's corner nodes: equilibria at the display rate, about "
+                   "twice as stiff as CalculiX; default) or quadratic (its 10-node tets: CalculiX's answer, equilibria a "
+                   "few times a second, the drawn organ and the force follow the tool by the last one's tangent between them)")
+      ->check(CLI::IsMember({"linear", "quadratic"}));
   prev->add_option("--tool-radius-mm", pa->contact.tool_radius_mm, "radius of the tool tip sphere, mm (default 2)")
       ->check(CLI::PositiveNumber);
   prev->add_option("--labels", pa->load.labels, "label map to draw when there are no meshes");

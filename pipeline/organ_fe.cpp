@@ -101,6 +101,29 @@ std::vector<std::array<double, 2>> read_curve(const fs::path& f) {
   return c;
 }
 
+// A curve sampled during a press, at the reference's depths (linear between its samples, only
+// within them), against the reference: rows of depth, reference, this, relative difference.
+nlohmann::json against_reference(const nlohmann::json& samples, const std::vector<std::array<double, 2>>& reference, double deepest) {
+  std::vector<std::array<double, 2>> c;
+  for (const auto& p : samples) c.push_back({p[0].get<double>(), p[1].get<double>()});
+  std::sort(c.begin(), c.end());
+  nlohmann::json rows = nlohmann::json::array();
+  double worst = 0.0;
+  for (const auto& [d, ref] : reference) {
+    if (c.empty() || d <= 0 || d < c.front()[0] || d > c.back()[0]) continue;
+    const auto hi = std::lower_bound(c.begin(), c.end(), std::array<double, 2>{d, -1e300});
+    const auto lo = hi == c.begin() ? hi : hi - 1;
+    const double w = (*hi)[0] > (*lo)[0] ? (d - (*lo)[0]) / ((*hi)[0] - (*lo)[0]) : 1.0;
+    const double f = (*lo)[1] + w * ((*hi)[1] - (*lo)[1]);
+    const double rel = ref != 0.0 ? (f - ref) / ref : 0.0;
+    rows.push_back({d, ref, f, rel});
+    if (d >= 0.2 * deepest) worst = std::max(worst, std::abs(rel));
+  }
+  return {{"depth_mm_solver_N_press_N_relative_difference", rows},
+          {"largest_relative_difference_past_20pct_depth", worst},
+          {"deepest_sampled_mm", c.empty() ? 0.0 : c.back()[0]}};
+}
+
 double percentile(std::vector<double> v, double p) {
   if (v.empty()) return 0.0;
   std::sort(v.begin(), v.end());
@@ -109,10 +132,10 @@ double percentile(std::vector<double> v, double p) {
 
 }  // namespace
 
-std::unique_ptr<RealtimeOrgan> realtime_organ(const fs::path& out, const std::string& organ, double tool_radius_mm) {
+std::unique_ptr<RealtimeOrgan> realtime_organ(const fs::path& out, const std::string& organ, double tool_radius_mm, bool quadratic) {
   auto r = std::make_unique<RealtimeOrgan>();
   OrganFeOptions fo;
-  fo.quadratic = false;
+  fo.quadratic = quadratic;
   r->fe = organ_fe(out, organ, fo);
   r->model = std::make_unique<physics::TissueModel>(r->fe.mesh);
   physics::RealtimeOptions ro;
@@ -121,12 +144,12 @@ std::unique_ptr<RealtimeOrgan> realtime_organ(const fs::path& out, const std::st
   return r;
 }
 
-std::unique_ptr<RealtimeOrgan> fe_for_haptics(const fs::path& out, const std::string& flag, double tool_radius_mm) {
+std::unique_ptr<RealtimeOrgan> fe_for_haptics(const fs::path& out, const std::string& flag, double tool_radius_mm, bool quadratic) {
   if (flag == "none") return nullptr;
-  if (!flag.empty()) return realtime_organ(out, flag, tool_radius_mm);
+  if (!flag.empty()) return realtime_organ(out, flag, tool_radius_mm, quadratic);
   if (!fs::exists(OutputLayout{out}.volume("gallbladder", "inp"))) return nullptr;
   try {
-    return realtime_organ(out, "gallbladder", tool_radius_mm);
+    return realtime_organ(out, "gallbladder", tool_radius_mm, quadratic);
   } catch (const Error& e) {
     spdlog::warn("the gallbladder is felt through its surface: no finite-element model from its solver file ({})", e.what());
     return nullptr;
@@ -141,19 +164,21 @@ nlohmann::json RealtimeOrgan::figures() const {
           {"update_ms_p99", tissue->update_ms_percentile(0.99)},
           {"update_hz", tissue->achieved_update_hz()},
           {"updates", tissue->updates()},
-          {"updates_refactorising", tissue->refreshes()},
-          {"tangents_from_second_thread", tissue->tangents_adopted()}};
+          {"equilibrium_hz", tissue->achieved_equilibrium_hz()},
+          {"equilibrium_ms_p50", tissue->equilibrium_ms_percentile(0.5)},
+          {"equilibrium_ms_p99", tissue->equilibrium_ms_percentile(0.99)},
+          {"equilibria", tissue->equilibria()}};
 }
 
-nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, double depth_mm, Progress& progress) {
+nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, double depth_mm, double speed, Progress& progress) {
   using clock = std::chrono::steady_clock;
   model.reset();
   physics::RealtimeOptions ro;
   physics::RealtimeTissue rt(model, fe.fixed_nodes, fe.surface_triangles, ro);
   const Eigen::Vector3d dir = fe.probe->direction_lps.normalized();
   const Eigen::Vector3d p0 = fe.probe->point_lps_mm - dir * (ro.tool_radius_mm + 1.0);
-  const double speed = 5.0;  // mm/s
-  const double travel = 1.0 + ro.tool_radius_mm + depth_mm;
+  // The sphere's front reaches the probe point after 1 mm; the grip then goes `depth_mm` in.
+  const double travel = 1.0 + depth_mm;
   const double t_in = travel / speed, t_hold = 0.5, t_rest = 1.0;
   const double total = 2 * t_in + t_hold + t_rest;
   auto tool_at = [&](double t) {
@@ -168,6 +193,11 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
   double fmax = 0.0, hold_force = 0.0, hold_fe_force = 0.0, hold_lag = 0.0;
   Eigen::Vector3d hold_held = Eigen::Vector3d::Zero();
   std::vector<std::int32_t> hold_grip;
+  // The press's force–depth curves while the tool goes in: what the force loop gave the tool
+  // against the depth the tool asked of the grip (felt), and each equilibrium's (solved).
+  std::vector<std::array<double, 2>> felt, solved;
+  std::uint64_t last_equilibrium = 0;
+  double gap_max = 0.0;
   const auto start = clock::now();
   auto next = start;
   std::int64_t ticks = 0;
@@ -192,6 +222,16 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
     rt.set_tool(x);
     const Eigen::Vector3d F = rt.tool_force_N(x);
     fmax = std::max(fmax, F.norm());
+    if (t <= t_in) {
+      const physics::ToolContact c = rt.contact();
+      if (c.in_contact && Eigen::Vector3d(c.held_mm.data()).norm() > 0) {
+        const Eigen::Vector3d grip = x + Eigen::Vector3d(c.held_mm.data()) - Eigen::Vector3d(c.tool_mm.data());
+        felt.push_back({grip.dot(dir), -F.dot(dir)});
+        if (c.update != last_equilibrium)
+          solved.push_back({Eigen::Vector3d(c.held_mm.data()).dot(dir), -Eigen::Vector3d(c.force_on_tool_N.data()).dot(dir)});
+        last_equilibrium = c.update;
+      }
+    }
     if (t <= t_in + t_hold) {  // the last one: the end of the hold
       hold_force = F.norm();
       const physics::ToolContact c = rt.contact();
@@ -210,6 +250,7 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
   while (!done.load()) {  // progress from this thread; the grip near the end of the hold
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
     const double t = std::chrono::duration<double>(clock::now() - start).count();
+    if (t < t_in + t_hold) gap_max = std::max(gap_max, rt.last_gap_mm());
     if (t > t_in + 0.5 * t_hold && t < t_in + t_hold) hold_grip = rt.grip_nodes();
     progress.report(std::min(1.0, t / total), "real-time press");
   }
@@ -228,12 +269,22 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
   const Eigen::VectorXd u = rt.displacement_mm();
   double umax = 0.0;
   for (Eigen::Index i = 0; i + 2 < u.size(); i += 3) umax = std::max(umax, u.segment<3>(i).norm());
-  return {{"update_ms_p50", rt.update_ms_percentile(0.5)},
+  auto to_json = [](const std::vector<std::array<double, 2>>& c) {
+    nlohmann::json a = nlohmann::json::array();
+    for (const auto& p : c) a.push_back({p[0], p[1]});
+    return a;
+  };
+  return {{"felt_curve", to_json(felt)},
+          {"solved_curve", to_json(solved)},
+          {"update_ms_p50", rt.update_ms_percentile(0.5)},
           {"update_ms_p99", rt.update_ms_percentile(0.99)},
           {"update_hz", rt.achieved_update_hz()},
           {"updates", rt.updates()},
-          {"updates_refactorising", rt.refreshes()},
-          {"tangents_from_second_thread", rt.tangents_adopted()},
+          {"equilibrium_hz", rt.achieved_equilibrium_hz()},
+          {"equilibrium_ms_p50", rt.equilibrium_ms_percentile(0.5)},
+          {"equilibrium_ms_p99", rt.equilibrium_ms_percentile(0.99)},
+          {"equilibria", rt.equilibria()},
+          {"largest_travel_ahead_of_equilibrium_mm", gap_max},
           {"force_rate_hz", double(ticks) / end_s},
           {"force_tick_us_p99", percentile(tick_us, 0.99)},
           {"force_jitter_us_p99", percentile(jitter_us, 0.99)},
@@ -260,7 +311,9 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
     const int n = std::max(1, int(std::ceil(fe.probe_depth_mm / o.max_step_mm - 1e-9)));
     for (int k = 1; k <= n; ++k) depths.push_back(fe.probe_depth_mm * k / n);
   }
-  physics::TissueModel model(fe.mesh);
+  physics::TissueModelOptions mo;
+  mo.solver_threads = 2;  // no display to share the cores with
+  physics::TissueModel model(fe.mesh, mo);
   model.set_boundary(fe.fixed_nodes, fe.probe_nodes);
   const Eigen::Vector3d dir = fe.probe->direction_lps.normalized();
   nlohmann::json curve = nlohmann::json::array(), cmp = nlohmann::json::array();
@@ -346,30 +399,17 @@ nlohmann::json haptics_indent(const fs::path& out, const std::string& organ, con
   j["curve_model"]["static_increments"] = solve_ms.size();
   j["curve_model"]["newton_iterations"] = iterations;
   j["curve_model"]["static_solve_ms"] = {{"p50", percentile(solve_ms, 0.5)}, {"p99", percentile(solve_ms, 0.99)}};
-  // The real-time press on the linear model (the 10-node one cannot be stepped at the display rate
-  // on two cores: TISSUE.md).
+  // The real-time press on the same model, through its threads.
   if (!o.realtime_press) return j;
   progress.report(1.0, "real-time press");
-  if (fe.mesh.nodes_per_element == 10) {
-    OrganFeOptions lo = o.fe;
-    lo.quadratic = false;
-    const OrganFe lin = organ_fe(out, organ, lo);
-    physics::TissueModel rmodel(lin.mesh);
-    j["fe"] = describe(lin);
-    const nlohmann::json rt = realtime_press(rmodel, lin, deepest, progress);
-    for (const auto& [k, v] : rt.items()) j["fe"][k] = v;
-  } else {
-    j["fe"] = describe(fe);
-    const nlohmann::json rt = realtime_press(model, fe, deepest, progress);
-    for (const auto& [k, v] : rt.items()) j["fe"][k] = v;
-  }
-  // How far the real-time press is from the solver's answer at the same depth (not the same
-  // contact: the tool grips the nodes it touches, the solver's probe is its 5 mm disc).
-  if (!reference.empty() && j["fe"].contains("press")) {
-    const double ref = reference.back()[1];
-    const double hold = j["fe"]["press"]["force_at_end_of_hold_N"].get<double>();
-    j["fe"]["press"]["calculix_probe_force_at_depth_N"] = ref;
-    j["fe"]["press"]["ratio_to_calculix_probe"] = ref > 0 ? hold / ref : 0.0;
+  j["fe"] = describe(fe);
+  const nlohmann::json rt = realtime_press(model, fe, deepest, o.press_speed_mm_per_s, progress);
+  for (const auto& [k, v] : rt.items())
+    if (k != "felt_curve" && k != "solved_curve") j["fe"][k] = v;
+  // The press's curves at the solver's depths (linear between samples) against its curve.
+  if (!reference.empty()) {
+    for (const char* which : {"felt_curve", "solved_curve"})
+      j["fe"]["press"][std::string(which) + "_against_solver"] = against_reference(rt[which], reference, deepest);
   }
   return j;
 }

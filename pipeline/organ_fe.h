@@ -43,15 +43,17 @@ struct OrganFeOptions {
 /// The real-time model pressed through its own threads (RealtimeTissue at 60 Hz, a 1 kHz force
 /// loop on this thread): a tool sphere from 1 mm off the probe point along the probe's direction
 /// to `depth_mm`, held, withdrawn, one second at rest. The `fe` timing figures and the rest check.
-nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, double depth_mm, Progress& progress);
+nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, double depth_mm, double speed_mm_per_s,
+                              Progress& progress);
 
 /// Throws InputError naming the INP when it is missing, has no indentation probe where one is
 /// asked for, or a region has no law.
 OrganFe organ_fe(const std::filesystem::path& out_dir, const std::string& organ, const OrganFeOptions& options);
 
-/// The organ's real-time model for a haptic loop (`preview`, `haptics --trajectory`): the linear
-/// model of its solver file, its update threads (not started) and the loop's reaction source
-/// (the tool sent to the model, its contact force read back; both lock-free).
+/// The organ's real-time model for a haptic loop (`preview`, `haptics --trajectory`): the solver
+/// file's model (its 10-node tetrahedra, or their corner nodes with `quadratic` false), its
+/// threads (not started) and the loop's reaction source (the tool sent to the model, its contact
+/// force read back; both lock-free).
 struct RealtimeOrgan final : physics::ReactionSource {
   OrganFe fe;
   std::unique_ptr<physics::TissueModel> model;
@@ -63,18 +65,22 @@ struct RealtimeOrgan final : physics::ReactionSource {
   /// nodes, tets, update_ms_p50/p99, update_hz, updates, updates_refactorising.
   nlohmann::json figures() const;
 };
-std::unique_ptr<RealtimeOrgan> realtime_organ(const std::filesystem::path& out_dir, const std::string& organ, double tool_radius_mm);
+std::unique_ptr<RealtimeOrgan> realtime_organ(const std::filesystem::path& out_dir, const std::string& organ, double tool_radius_mm,
+                                              bool quadratic);
 /// `--fe ORGAN` of `preview` and `haptics --trajectory`: that organ's model (errors are the
 /// command's); empty (the default): the gallbladder's where the mesh stage wrote its solver file
 /// and a model can be built from it (else null, with a warning naming why); "none": null.
 std::unique_ptr<RealtimeOrgan> fe_for_haptics(const std::filesystem::path& out_dir, const std::string& fe_flag,
-                                              double tool_radius_mm);
+                                              double tool_radius_mm, bool quadratic);
 
 struct IndentOptions {
   OrganFeOptions fe;
   double max_step_mm = 0.15;  ///< probe travel per quasi-static increment
   std::filesystem::path picture_png;  ///< the organ at the deepest indentation, stress-coloured (none: empty)
   bool realtime_press = true;         ///< also press the real-time model through its threads (the `fe` figures)
+  /// … at this speed: slow enough for the 10-node model's equilibria to keep up on two cores
+  /// (quasi-static; TISSUE.md has the felt curve's error against the speed).
+  double press_speed_mm_per_s = 0.5;
   int picture_width_px = 1024, picture_height_px = 768;
 };
 

@@ -16,9 +16,9 @@
 #include <set>
 #include <string>
 
-// OpenBLAS, when it is the system's BLAS, runs CHOLMOD's dense blocks on one thread: the model
-// shares the machine with the haptic loop and the display, and OpenBLAS's spinning threads took
-// 22 s of system time in a 30 s indentation run (no faster in wall time).
+// OpenBLAS, when it is the system's BLAS, runs CHOLMOD's dense blocks on
+// TissueModelOptions::solver_threads: beside the haptic loop and the display one (OpenBLAS's
+// spinning threads took 22 s of system time in a 30 s indentation run of the linear model).
 extern "C" void openblas_set_num_threads(int) __attribute__((weak));
 
 namespace organsmith::physics {
@@ -152,7 +152,7 @@ struct TissueModel::Impl {
 
 TissueModel::TissueModel(TissueMesh mesh, TissueModelOptions options)
     : mesh_(std::move(mesh)), options_(options), impl_(std::make_unique<Impl>()) {
-  if (openblas_set_num_threads) openblas_set_num_threads(1);
+  if (openblas_set_num_threads) openblas_set_num_threads(std::max(1, options_.solver_threads));
   Impl& I = *impl_;
   const std::size_t n = mesh_.nodes_mm.size();
   const int npe = mesh_.nodes_per_element;
@@ -271,6 +271,13 @@ void TissueModel::reset() {
   v_.setZero();
   impl_->f.setZero();
   held_stiffness_.setZero();
+  held_response_.resize(0, 0);
+}
+
+void TissueModel::set_displacement_mm(const Eigen::VectorXd& u) {
+  if (u.size() != u_.size()) throw InputError(ExitCode::unsupported_input, "a displacement of the wrong size");
+  u_ = u;
+  v_.setZero();
 }
 
 void TissueModel::set_boundary(std::vector<std::int32_t> fixed, std::vector<std::int32_t> held) {
@@ -286,6 +293,7 @@ void TissueModel::set_boundary(std::vector<std::int32_t> fixed, std::vector<std:
   fixed_ = std::move(fixed);
   held_ = std::move(h);
   ++boundary_version_;
+  held_response_.resize(0, 0);
   impl_->constrained.assign(3 * n, 0);
   for (auto* s : {&fixed_, &held_})
     for (std::int32_t i : *s)
@@ -531,8 +539,10 @@ NewtonReport TissueModel::newton(const Eigen::Vector3d& held_mm, double dt, cons
     if (!held_.empty()) {
       const Eigen::MatrixXd X = I.solve(Eigen::MatrixXd(Kfh));
       held_stiffness_ = Khh - Kfh.transpose() * X;
+      held_response_ = -X;
+      for (std::int32_t i : held_)
+        for (int k = 0; k < 3; ++k) held_response_.row(3 * i + k) = Eigen::RowVector3d::Unit(k);
     }
-    if (factor_only_) break;
     if (rmax <= tol && cgap <= 1e-12) {
       rep.converged = true;
       break;
@@ -561,7 +571,7 @@ NewtonReport TissueModel::newton(const Eigen::Vector3d& held_mm, double dt, cons
     r = rt;
   }
   I.f = r;
-  if (!rep.converged && !factor_only_ && rep.iterations > 0) {
+  if (!rep.converged && rep.iterations > 0) {
     // The residual where the iterations left the state (the loop measured it before its step).
     double rmax = 0.0;
     for (std::size_t d = 0; d < 3 * n; ++d)
@@ -576,190 +586,115 @@ NewtonReport TissueModel::newton(const Eigen::Vector3d& held_mm, double dt, cons
   return rep;
 }
 
-double TissueModel::refresh_tangent(double dt) {
-  const auto t0 = std::chrono::steady_clock::now();
-  const Eigen::VectorXd u = u_, v = v_;
-  factor_only_ = true;
-  newton(Eigen::Vector3d::Zero(), dt, NewtonOptions{});
-  factor_only_ = false;
-  u_ = u;
-  v_ = v;
-  return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-}
-
-void TissueModel::copy_state_from(const TissueModel& other) {
-  if (other.fixed_ != fixed_ || other.held_ != held_) set_boundary(other.fixed_, other.held_);
-  u_ = other.u_;
-  v_ = other.v_;
-}
-
-bool TissueModel::adopt_tangent(TissueModel& other) {
-  Impl& mine = *impl_;
-  const Impl& theirs = *other.impl_;
-  if (!theirs.factor_valid || theirs.factor_boundary != other.boundary_version_ || other.fixed_ != fixed_ || other.held_ != held_)
-    return false;
-  if (mine.factor_valid && mine.factor_dt != theirs.factor_dt) return false;
-  Eigen::VectorXd f = std::move(mine.f);
-  std::swap(impl_, other.impl_);
-  impl_->f = std::move(f);
-  impl_->factor_boundary = boundary_version_;
-  other.impl_->factor_valid = false;
-  std::swap(held_stiffness_, other.held_stiffness_);
-  return true;
-}
-
-NewtonReport TissueModel::step_dynamic_reusing_tangent(const Eigen::Vector3d& held_mm, double dt, const NewtonOptions& o,
-                                                       bool refresh_when_slow) {
+NewtonReport TissueModel::solve_static_quasi_newton(const Eigen::Vector3d& held_mm, const NewtonOptions& o) {
   Impl& I = *impl_;
-  if (!I.factor_valid || I.factor_boundary != boundary_version_ || I.factor_dt != dt) return full_step(held_mm, dt, o, 0.0);
-  const std::size_t n = node_count();
-  const Eigen::VectorXd u0 = u_, v0 = v_;
-  const double cm = dt > 0 ? 1.0 / (dt * dt) + damping_per_s / dt : 0.0;
-  const auto t0 = std::chrono::steady_clock::now();
-  auto over_budget = [&] {
-    return o.time_budget_ms > 0 &&
-           std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count() > o.time_budget_ms;
-  };
-  auto residual_at = [&](Eigen::VectorXd& r, double& rmax) {
-    double phi = 0.0;
-    rmax = std::numeric_limits<double>::infinity();
-    if (!I.evaluate(mesh_, u_, phi, r, nullptr)) return false;  // an element inverted
-    if (dt > 0)
-      for (std::size_t i = 0; i < n; ++i)
-        for (int k = 0; k < 3; ++k) {
-          const std::size_t d = 3 * i + k;
-          r[d] += cm * I.mass[i] * (u_[d] - u0[d]) - I.mass[i] * v0[d] / dt;
-        }
-    rmax = 0.0;
-    for (std::size_t d = 0; d < 3 * n; ++d)
-      if (!I.constrained[d]) rmax = std::max(rmax, std::abs(r[d]));
-    return true;
-  };
+  const std::size_t n = node_count(), nd = 3 * n;
   NewtonReport rep;
-  Eigen::VectorXd r(3 * n), rhs(3 * n), du(3 * n), u_prev, r_prev, f_start;
-  double corrected = std::numeric_limits<double>::infinity();  // after the first correction (the held set moved)
-  double last = std::numeric_limits<double>::infinity(), start_force = 0.0;
-  rep.iterations = 0;
-  while (true) {
-    double rmax = 0.0;
-    const bool ok = residual_at(r, rmax);
-    // A correction that inverted an element, or (past the first, which moves the held set) made
-    // the residual grow, is halved up to three times; then the iterations stop where they were.
-    if (rep.iterations >= 1 && (!ok || (rep.iterations >= 2 && !(rmax <= last)))) {
-      int halvings = 0;
-      bool better = false;
-      while (halvings < 3 && !better) {
-        du *= 0.5;
-        u_ = u_prev + du;
-        ++halvings;
-        double rm = 0.0;
-        better = residual_at(r, rm) && (rep.iterations < 2 || rm <= last);
-        rmax = rm;
-      }
-      if (!better) {
-        u_ = u_prev;
-        r = r_prev;
-        rmax = last;
-        if (rep.iterations == 1) rmax = std::numeric_limits<double>::infinity();  // the held set could not be moved
-        rep.residual_N = rmax;
-        I.f = r;
-        break;
-      }
-    } else if (!ok) {
-      rep.residual_N = std::numeric_limits<double>::infinity();
-      break;
-    }
-    I.f = r;
-    rhs = -r;
-    Eigen::Vector3d shift = Eigen::Vector3d::Zero();
-    for (std::int32_t i : fixed_) rhs.segment<3>(3 * i) = -u_.segment<3>(3 * i);
-    for (std::int32_t i : held_) {
-      rhs.segment<3>(3 * i) = held_mm - u_.segment<3>(3 * i);
-      shift += rhs.segment<3>(3 * i) / double(held_.size());
-    }
-    Eigen::Vector3d fh = Eigen::Vector3d::Zero();
-    for (std::int32_t i : held_) fh += r.segment<3>(3 * i);
-    rep.residual_N = rmax;
-    if (rep.iterations == 0) rep.initial_residual_N = rmax, start_force = fh.norm(), f_start = r;
-    if (rep.iterations == 1) corrected = rmax;
-    if (rmax <= std::max(o.force_tolerance_N, o.relative_tolerance * fh.norm()) && shift.norm() <= 1e-12) {
-      rep.converged = true;
-      break;
-    }
-    if (rep.iterations == o.max_iterations || (rep.iterations >= 1 && over_budget())) break;
-    if (!held_.empty()) {
-      const Eigen::VectorXd c = I.Kfh * shift;
-      for (std::size_t d = 0; d < 3 * n; ++d)
-        if (!I.constrained[d]) rhs[d] -= c[d];
-    }
-    du = I.solve(rhs);
-    u_prev = u_;
-    r_prev = r;
-    last = rmax;
-    u_ += du;
-    ++rep.iterations;
-  }
-  // Sync mode: the corrections must halve the residual from the first corrected state, else the
-  // tangent is refreshed here. Async mode (a second thread refreshes it): what the backtracked
-  // corrections reached is where the next update goes on from, as long as it is not far worse
-  // than where this step started (ten times its residual, or a fifth of the tool's force then:
-  // tighter, the default gallbladder refactorises in one update in twenty; looser, a 1 000-node
-  // model goes on from states it cannot recover from).
-  const double reference = rep.iterations >= 2 ? corrected : rep.initial_residual_N;
-  const bool finite = u_.allFinite() && std::isfinite(rep.residual_N);
-  const bool accept =
-      finite && (rep.converged ||
-                 (refresh_when_slow ? rep.residual_N <= std::max(0.5 * reference, o.force_tolerance_N)
-                                    : rep.residual_N <= std::max({10.0 * rep.initial_residual_N, 0.2 * start_force, o.force_tolerance_N})));
-  if (!accept) {
-    // The last tangent does not contract the residual any more (the law stiffened, or the
-    // contact moved on): the step again from its start, with a new tangent.
-    u_ = u0;
-    v_ = v0;
-    if (refresh_when_slow) return full_step(held_mm, dt, o, rep.initial_residual_N);
-    // Against a clock: one full iteration, kept when it is acceptable by the same measure; else
-    // the state stays where it was (the next update tries again, with a fresher tangent).
-    NewtonOptions one = o;
-    one.max_iterations = 1;
-    NewtonReport full = newton(held_mm, dt, one);
-    full.refreshed = true;
-    full.initial_residual_N = rep.initial_residual_N;
-    if (!(u_.allFinite() && std::isfinite(full.residual_N) &&
-          (full.converged || full.residual_N <= std::max({10.0 * rep.initial_residual_N, 0.2 * start_force, o.force_tolerance_N})))) {
-      u_ = u0;
-      v_ = v0;
-      impl_->f = f_start;
-      full.stayed = true;
-    }
-    return full;
-  }
-  if (dt > 0) v_ = (u_ - u0) / dt;
-  return rep;
-}
-
-NewtonReport TissueModel::full_step(const Eigen::Vector3d& held_mm, double dt, const NewtonOptions& o, double start_residual_N) {
-  const Eigen::VectorXd u0 = u_, v0 = v_;
   NewtonOptions one = o;
   one.max_iterations = 1;
-  NewtonReport full = newton(held_mm, dt, one);
-  // One full iteration normally ends far below where the step started; where it does not (a
-  // contact just made, a stiff law), iterate to equilibrium rather than go on from a worse state.
-  if (!u_.allFinite() ||
-      !(full.converged || full.residual_N <= std::max({start_residual_N, 0.01 * held_force_N().norm(), o.force_tolerance_N}))) {
-    u_ = u0;
-    v_ = v0;
-    NewtonOptions more = o;
-    more.max_iterations = 8;
-    more.time_budget_ms = 0.0;
-    full = newton(held_mm, dt, more);
-    if (!u_.allFinite()) {
-      u_ = u0;
-      v_ = v0;
+  auto free_part = [&](Eigen::VectorXd& v) {
+    for (std::size_t d = 0; d < nd; ++d)
+      if (I.constrained[d]) v[d] = 0.0;
+  };
+  Eigen::VectorXd r(nd), g(nd), g_prev, u_prev, dir(nd), q(nd), rhs(nd);
+  double phi = 0.0;
+  for (int round = 0; round < 3; ++round) {
+    if (!I.factor_valid || I.factor_boundary != boundary_version_ || I.factor_dt != 0.0 || round > 0) {
+      const NewtonReport full = newton(held_mm, 0.0, one);  // factorises, moves the held set
+      rep.refreshed = true;
+      rep.iterations += full.iterations;
+      rep.residual_N = full.residual_N;
+      if (full.converged || !u_.allFinite() || !std::isfinite(full.residual_N)) {
+        rep.converged = full.converged;
+        return rep;
+      }
+    }
+    // Pairs (s, y) of this round: steps of the free nodes and the change of their residual.
+    std::vector<Eigen::VectorXd> S, Y;
+    std::vector<double> rho;
+    constexpr std::size_t kPairs = 12;
+    bool first = true;
+    for (int it = 0; it < o.max_iterations; ++it) {
+      if (!I.evaluate(mesh_, u_, phi, r, nullptr)) break;  // an element inverted: refactorise from the last state
+      I.f = r;
+      g = r;
+      free_part(g);
+      const double rmax = g.cwiseAbs().maxCoeff();
+      Eigen::Vector3d fh = Eigen::Vector3d::Zero();
+      for (std::int32_t i : held_) fh += r.segment<3>(3 * i);
+      double cgap = 0.0;
+      for (std::int32_t i : held_) cgap = std::max(cgap, (held_mm - u_.segment<3>(3 * i)).cwiseAbs().maxCoeff());
+      rep.residual_N = rmax;
+      if (rmax <= std::max(o.force_tolerance_N, o.relative_tolerance * fh.norm()) && cgap <= 1e-12) {
+        rep.converged = true;
+        return rep;
+      }
+      if (!first) {
+        Eigen::VectorXd s_k = u_ - u_prev;
+        free_part(s_k);  // the held set's prescribed move is not a step of the energy's variables
+        const Eigen::VectorXd y_k = g - g_prev;
+        const double sy = s_k.dot(y_k);
+        if (sy > 1e-12 * s_k.norm() * y_k.norm()) {
+          if (S.size() == kPairs) S.erase(S.begin()), Y.erase(Y.begin()), rho.erase(rho.begin());
+          S.push_back(s_k), Y.push_back(y_k), rho.push_back(1.0 / sy);
+        }
+      }
+      if (first && cgap > 1e-12) {
+        // The held set to its place, the free nodes by the tangent's response (a correction).
+        Eigen::Vector3d shift = Eigen::Vector3d::Zero();
+        rhs = -g;
+        for (std::int32_t i : held_) {
+          rhs.segment<3>(3 * i) = held_mm - u_.segment<3>(3 * i);
+          shift += rhs.segment<3>(3 * i) / double(held_.size());
+        }
+        const Eigen::VectorXd c = I.Kfh * shift;
+        for (std::size_t d = 0; d < nd; ++d)
+          if (!I.constrained[d]) rhs[d] -= c[d];
+        dir = I.solve(rhs);
+        u_prev = u_, g_prev = g;
+        u_ += dir;
+        first = false;
+        ++rep.iterations;
+        continue;
+      }
+      // Two-loop recursion: dir = −H g, H the inverse tangent updated by the pairs.
+      q = g;
+      std::vector<double> a(S.size());
+      for (std::size_t k = S.size(); k-- > 0;) {
+        a[k] = rho[k] * S[k].dot(q);
+        q -= a[k] * Y[k];
+      }
+      dir = I.solve(q);
+      free_part(dir);
+      for (std::size_t k = 0; k < S.size(); ++k) {
+        const double b = rho[k] * Y[k].dot(dir);
+        dir += (a[k] - b) * S[k];
+      }
+      dir = -dir;
+      const double slope = g.dot(dir);
+      if (!(slope < 0)) break;  // not a descent direction: refactorise
+      // Backtracking on the energy (Armijo), or on the residual where the energy's change is
+      // below its rounding (near equilibrium); an inverted element halves the step.
+      u_prev = u_, g_prev = g;
+      double alpha = 1.0, phit = 0.0;
+      bool ok = false;
+      for (int ls = 0; ls < 8 && !ok; ++ls, alpha *= 0.5) {
+        u_ = u_prev + alpha * dir;
+        if (!I.evaluate(mesh_, u_, phit, r, nullptr)) continue;
+        double rt = 0.0;
+        for (std::size_t d = 0; d < nd; ++d)
+          if (!I.constrained[d]) rt = std::max(rt, std::abs(r[d]));
+        ok = phit <= phi + 1e-4 * alpha * slope || (std::abs(alpha * slope) < 1e-10 * std::abs(phi) && rt < rmax);
+      }
+      if (!ok) {
+        u_ = u_prev;
+        break;
+      }
+      first = false;
+      ++rep.iterations;
     }
   }
-  full.initial_residual_N = start_residual_N;
-  full.refreshed = true;
-  return full;
+  return rep;
 }
 
 Eigen::Vector3d TissueModel::held_force_N() const {

@@ -42,16 +42,13 @@ struct NewtonOptions {
   int max_iterations = 25;
   double force_tolerance_N = 1e-7;   ///< largest free residual component
   double relative_tolerance = 1e-6;  ///< … or this fraction of the held set's force
-  double time_budget_ms = 0.0;       ///< step_dynamic_reusing_tangent: no new correction past this (0: none)
 };
 
 struct NewtonReport {
   bool converged = false;
   int iterations = 0;
   double residual_N = 0.0;  ///< largest free residual component at the end
-  double initial_residual_N = 0.0;  ///< … at the start
   bool refreshed = false;           ///< the tangent was assembled and factorised in this call
-  bool stayed = false;              ///< the step was not taken: the state is where it started
 };
 
 struct TissueModelOptions {
@@ -61,6 +58,10 @@ struct TissueModelOptions {
   /// its elements. One pressure per element locks a nearly incompressible solid (TISSUE.md has
   /// the figures). Ignored for quadratic tetrahedra (four points, as the solver).
   bool nodal_volume = true;
+  /// Threads for the sparse Cholesky's dense blocks (OpenBLAS, process-wide, set when a model is
+  /// made): 1 beside a display and a haptic loop; 2 on two cores with nothing else to draw
+  /// (10-node gallbladder: 90 ms a factorisation against 150 ms on one).
+  int solver_threads = 1;
 };
 
 class TissueModel {
@@ -86,26 +87,14 @@ class TissueModel {
   /// One backward-Euler step of `dt_s` with the held nodes at `held_mm` at its end.
   NewtonReport step_dynamic(const Eigen::Vector3d& held_mm, double dt_s, const NewtonOptions& options = {});
 
-  /// The same step for a fixed time budget: up to `options.max_iterations` corrections with the
-  /// last factorised tangent (no assembly, no factorisation: a back-substitution each), unless
-  /// there is none for this boundary and step, or those corrections do not at least halve the
-  /// residual: then the step is made again from its start with one full Newton iteration (with
-  /// its line search). The held-set stiffness is that of the last factorisation.
-  /// With `refresh_when_slow` false the step refactorises only where it has no tangent for this
-  /// boundary or its corrections made the residual grow (past 5 % of the held force): a slower
-  /// contraction is accepted, for a tangent refreshed elsewhere (adopt_tangent) to take over.
-  NewtonReport step_dynamic_reusing_tangent(const Eigen::Vector3d& held_mm, double dt_s, const NewtonOptions& options,
-                                            bool refresh_when_slow = true);
-  /// Assembles and factorises the tangent at the current state for a step of dt_s (the next
-  /// reusing steps use it). Returns its wall time, ms.
-  double refresh_tangent(double dt_s);
-  /// For a tangent refreshed on another thread: this model takes `other`'s displacement,
-  /// velocity and boundary (a model built from the same mesh and options).
-  void copy_state_from(const TissueModel& other);
-  /// Takes `other`'s last factorised tangent (and held-set stiffness) when it was made for this
-  /// model's boundary and a step of the same length; `other` gets this model's old one. False
-  /// (and nothing exchanged) otherwise.
-  bool adopt_tangent(TissueModel& other);
+  /// Quasi-static equilibrium with the held nodes at `held_mm` by BFGS (Matthies & Strang 1979):
+  /// the last factorised tangent (of this boundary, static) as the initial inverse Hessian,
+  /// updated by the secant pairs of the iterations (at most `options.max_iterations`, a residual
+  /// and a back-substitution each), with a backtracking line search on the energy. Where there is
+  /// no such tangent, or the iterations do not converge, one Newton iteration refactorises it and
+  /// the iterations go on from there (at most twice). The held-set stiffness and response are
+  /// the last factorisation's. `refreshed` says whether this call factorised.
+  NewtonReport solve_static_quasi_newton(const Eigen::Vector3d& held_mm, const NewtonOptions& options);
   const TissueModelOptions& options() const { return options_; }
 
   /// Sum of internal forces over the held nodes at the current state (N): the force the tissue
@@ -115,8 +104,15 @@ class TissueModel {
   /// equilibrium (the Schur complement of the tangent on the held set's translation; for a
   /// dynamic step it includes the step's inertia). Valid after a solve.
   Eigen::Matrix3d held_stiffness_N_per_mm() const { return held_stiffness_; }
+  /// d(displacement)/d(held displacement) at the same state (3 per node × 3): the whole model's
+  /// first-order response to a motion of the held set, the free nodes in equilibrium (identity
+  /// rows at the held nodes, zero at the fixed ones). Valid after a solve with a held set.
+  const Eigen::MatrixXd& held_response() const { return held_response_; }
 
   const Eigen::VectorXd& displacement_mm() const { return u_; }
+  /// Back to a displacement this model had (velocity zero), e.g. the last equilibrium after an
+  /// increment that did not converge. Its size must be 3 per node.
+  void set_displacement_mm(const Eigen::VectorXd& u);
   void reset();  ///< back to rest (zero displacement and velocity)
   double strain_energy_mJ() const;  ///< N·mm
   /// Largest principal stretch per element (from its mean deformation gradient) at the current state.
@@ -135,12 +131,9 @@ class TissueModel {
   std::vector<std::int32_t> fixed_, held_;
   Eigen::VectorXd u_, v_;  ///< displacement (mm), velocity (mm/s)
   Eigen::Matrix3d held_stiffness_ = Eigen::Matrix3d::Zero();
+  Eigen::MatrixXd held_response_;
   NewtonReport newton(const Eigen::Vector3d& held_mm, double dt_s, const NewtonOptions& options);
-  /// A step from the current state with new tangents: one full iteration, up to eight where one
-  /// leaves the residual above `start_residual_N` and 1 % of the held force.
-  NewtonReport full_step(const Eigen::Vector3d& held_mm, double dt_s, const NewtonOptions& options, double start_residual_N);
   std::uint64_t boundary_version_ = 0;
-  bool factor_only_ = false;  ///< newton(): assemble and factorise at the current state, move nothing
 };
 
 }  // namespace organsmith::physics

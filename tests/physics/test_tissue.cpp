@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include <map>
+#include <memory>
 
 #include <cmath>
 
@@ -167,6 +168,61 @@ TEST(TissueModel, HeldStiffnessIsTheDerivativeOfTheHeldForce) {
       const Eigen::Vector3d fd = (mp.held_force_N() - f0) / h;
       EXPECT_LT((fd - K.col(k)).norm(), 2e-3 * K.norm()) << (quadratic ? "tet10" : "tet4") << " column " << k;
     }
+  }
+}
+
+// The response the display draws between equilibria: d(displacement)/d(held displacement) at a
+// converged state, against a central difference of two converged solves.
+TEST(TissueModel, HeldResponseIsTheDerivativeOfTheDisplacement) {
+  for (bool quadratic : {false, true}) {
+    Block b = make_block(quadratic, wall_law());
+    NewtonOptions tight;
+    tight.force_tolerance_N = 1e-13;
+    tight.relative_tolerance = 1e-12;
+    const Eigen::Vector3d d(0.1, 0.05, -0.5);
+    auto solved = [&](const Eigen::Vector3d& at) {
+      auto m = std::make_unique<TissueModel>(b.mesh);
+      m->set_boundary(b.bottom, b.top);
+      for (int s = 1; s <= 4; ++s) EXPECT_TRUE(m->solve_static(at * s / 4.0, tight).converged);
+      return m;
+    };
+    const auto m = solved(d);
+    const Eigen::MatrixXd R = m->held_response();
+    ASSERT_EQ(R.rows(), m->displacement_mm().size());
+    ASSERT_EQ(R.cols(), 3);
+    for (int k = 0; k < 3; ++k) {
+      const double h = 1e-4;
+      const Eigen::VectorXd fd = (solved(d + h * Eigen::Vector3d::Unit(k))->displacement_mm() -
+                                  solved(d - h * Eigen::Vector3d::Unit(k))->displacement_mm()) / (2 * h);
+      EXPECT_LT((fd - R.col(k)).norm(), 1e-3 * fd.norm()) << (quadratic ? "tet10" : "tet4") << " column " << k;
+    }
+    for (std::int32_t i : b.bottom) EXPECT_EQ(R.row(3 * i).norm(), 0.0);
+  }
+}
+
+// The equilibrium the real-time model publishes: BFGS on the last factorised tangent reaches the
+// same state as Newton, in increments as the real-time thread takes them, and factorises less.
+TEST(TissueModel, QuasiNewtonReachesNewtonsEquilibrium) {
+  for (bool quadratic : {false, true}) {
+    Block b = make_block(quadratic, wall_law());
+    TissueModel newton(b.mesh), bfgs(b.mesh);
+    newton.set_boundary(b.bottom, b.top);
+    bfgs.set_boundary(b.bottom, b.top);
+    NewtonOptions o;
+    o.relative_tolerance = 1e-8;
+    o.force_tolerance_N = 1e-12;
+    o.max_iterations = 30;
+    const Eigen::Vector3d d(0.05, 0.0, -0.8);
+    int factorised = 0;
+    for (int s = 1; s <= 8; ++s) {
+      ASSERT_TRUE(newton.solve_static(d * s / 8.0, o).converged);
+      const NewtonReport r = bfgs.solve_static_quasi_newton(d * s / 8.0, o);
+      ASSERT_TRUE(r.converged) << (quadratic ? "tet10" : "tet4") << " increment " << s;
+      factorised += r.refreshed;
+    }
+    EXPECT_LT((newton.displacement_mm() - bfgs.displacement_mm()).cwiseAbs().maxCoeff(), 1e-5);
+    EXPECT_NEAR(bfgs.held_force_N().z(), newton.held_force_N().z(), 1e-5 * std::abs(newton.held_force_N().z()));
+    EXPECT_LT(factorised, 8) << (quadratic ? "tet10" : "tet4") << ": one factorisation an increment is Newton's cost";
   }
 }
 

@@ -220,19 +220,32 @@ TEST(Simulate, IndentationCurveRisesBalancesAndStaysInRange) {
 
   // The haptic model pressed as the solver pressed it: the same 10-node mesh and law give the
   // solver's curve (issue 38 asks for 15 %; the same discretisation should agree to round-off, so
-  // 1 % catches a wrong element, law or boundary), and the real-time press returns to rest.
+  // 1 % catches a wrong element, law or boundary). The real-time model pressed through its threads
+  // at the quasi-static default speed: the force the loop gives the tool follows the solver's
+  // curve within the issue's 15 % (what it feels between equilibria is their tangent's
+  // extrapolation, so this fails where the equilibria or their response are wrong), the hold feels
+  // the same grip's static answer, and the organ is back at rest a second after the tool left.
   const auto ind_run = run_cli("haptics " + quoted(out) + " --indent gallbladder --out " + quoted(tmp / "indent.json"));
   ASSERT_EQ(ind_run.exit_code, 0) << ind_run.output;
   const nlohmann::json h = read_json(tmp / "indent.json");
   ASSERT_TRUE(h.contains("solver_curve")) << h.dump(2);
   EXPECT_EQ(h["curve"].size(), curve.size() - (curve[0][0].get<double>() == 0.0 ? 1 : 0));
   EXPECT_LT(h["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>(), 0.01) << h["solver_curve"].dump(2);
-  EXPECT_GT(h["fe"]["press"]["peak_force_N"].get<double>(), 0.0) << h["fe"].dump(2);
-  EXPECT_LT(h["fe"]["press"]["rest_fraction_of_depth"].get<double>(), 0.01) << h["fe"].dump(2);
-  std::printf("haptics --indent: curve within %.2g of CalculiX past 20 %% of the depth; real-time model %d nodes, update p50 %.3g ms "
-              "p99 %.3g ms, force loop %.0f Hz\n",
+  const nlohmann::json& press = h["fe"]["press"];
+  EXPECT_GT(press["peak_force_N"].get<double>(), 0.0) << h["fe"].dump(2);
+  ASSERT_TRUE(press.contains("felt_curve_against_solver")) << h["fe"].dump(2);
+  const nlohmann::json& felt = press["felt_curve_against_solver"];
+  EXPECT_GE(felt["depth_mm_solver_N_press_N_relative_difference"].size(), curve.size() / 2) << felt.dump(2);
+  EXPECT_LT(felt["largest_relative_difference_past_20pct_depth"].get<double>(), 0.15) << felt.dump(2);
+  EXPECT_NEAR(press["force_at_end_of_hold_N"].get<double>(), press["static_force_same_grip_N"].get<double>(),
+              0.05 * press["static_force_same_grip_N"].get<double>());
+  EXPECT_LT(press["rest_fraction_of_depth"].get<double>(), 0.01) << h["fe"].dump(2);
+  std::printf("haptics --indent: curve within %.2g of CalculiX past 20 %% of the depth; real-time model %d nodes, force felt at "
+              "%.2g mm/s within %.2g of CalculiX, equilibria %.3g Hz (p50 %.3g ms), display update p99 %.3g ms, force loop %.0f Hz\n",
               h["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>(), h["fe"]["nodes"].get<int>(),
-              h["fe"]["update_ms_p50"].get<double>(), h["fe"]["update_ms_p99"].get<double>(), h["fe"]["force_rate_hz"].get<double>());
+              press["speed_mm_per_s"].get<double>(), felt["largest_relative_difference_past_20pct_depth"].get<double>(),
+              h["fe"]["equilibrium_hz"].get<double>(), h["fe"]["equilibrium_ms_p50"].get<double>(),
+              h["fe"]["update_ms_p99"].get<double>(), h["fe"]["force_rate_hz"].get<double>());
   // Its picture, and the snapshot stage's when the case asks for it (the other stages reused).
   EXPECT_TRUE(fs::exists(tmp / "indent.png"));
   std::ofstream(tmp / "case.toml", std::ios::app) << "[stages.snapshot]\nviews = [\"organs\"]\nwidth_px = 640\nheight_px = 480\n"
@@ -286,14 +299,16 @@ TEST(Simulate, TracheaPressedOnItsAnteriorWall) {
   const nlohmann::json h = read_json(tmp / "indent.json");
   ASSERT_TRUE(h.contains("solver_curve")) << h.dump(2);
   EXPECT_LT(h["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>(), 0.01) << h["solver_curve"].dump(2);
-  // The real-time (linear, ~2400-node) model's press is reported, not checked here: on a tube this
-  // fine it misses the 60 Hz budget (TISSUE.md).
+  // The real-time press is reported, not checked here: a tube's wall is meshed at its thickness, and
+  // this 10-node model's equilibria come too seldom for the quasi-static speed (TISSUE.md).
+  const nlohmann::json& press = h["fe"]["press"];
   std::printf("trachea probe: %zu points to %.3g mm, %.3g N; haptics --indent within %.2g of CalculiX past 20 %% of the "
-              "depth; real-time model %d nodes, update p99 %.3g ms, hold force %.3g x the solver's, rest %.3g of the depth\n",
+              "depth; real-time model %d nodes, equilibria %.3g Hz, force felt within %.3g of CalculiX, rest %.3g of the depth\n",
               curve.size(), ind["depth_mm"].get<double>(), curve.back()[1].get<double>(),
               h["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>(), h["fe"]["nodes"].get<int>(),
-              h["fe"]["update_ms_p99"].get<double>(), h["fe"]["press"].value("ratio_to_calculix_probe", 0.0),
-              h["fe"]["press"]["rest_fraction_of_depth"].get<double>());
+              h["fe"]["equilibrium_hz"].get<double>(),
+              press.contains("felt_curve_against_solver") ? press["felt_curve_against_solver"]["largest_relative_difference_past_20pct_depth"].get<double>() : -1.0,
+              press["rest_fraction_of_depth"].get<double>());
 }
 
 // A scan the phantom is not: the gallbladder of a 3 mm abdominal CT (the reference mask, meshed at
