@@ -175,6 +175,7 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
   model.reset();
   physics::RealtimeOptions ro;
   physics::RealtimeTissue rt(model, fe.fixed_nodes, fe.surface_triangles, ro);
+  rt.hold_on_contact(fe.probe_nodes);  // the tool is the simulate stage's probe: it holds the probe's faces
   const Eigen::Vector3d dir = fe.probe->direction_lps.normalized();
   const Eigen::Vector3d p0 = fe.probe->point_lps_mm - dir * (ro.tool_radius_mm + 1.0);
   // The sphere's front reaches the probe point after 1 mm; the grip then goes `depth_mm` in.

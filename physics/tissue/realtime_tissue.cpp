@@ -115,6 +115,7 @@ RealtimeTissue::Touch RealtimeTissue::touch(const Eigen::Vector3d& tool) const {
   if (!any)
     for (std::size_t f = 0; f + 2 < tri_.size(); f += 3)
       if (tri_[f] == t.node || tri_[f + 1] == t.node || tri_[f + 2] == t.node) add_face(f);
+  if (!hold_on_contact_.empty()) g = std::set<std::int32_t>(hold_on_contact_.begin(), hold_on_contact_.end());
   for (std::int32_t i : g)
     if (!is_fixed_[std::size_t(i)]) t.grip.push_back(i);
   return t;

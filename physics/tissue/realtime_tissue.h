@@ -78,6 +78,10 @@ class RealtimeTissue {
   void start();  ///< the equilibrium and update threads
   void stop();
 
+  /// The nodes the tool holds when it touches, instead of the disc under it (the simulate stage's
+  /// probe nodes, for a press that is that probe). Before start(); empty: the disc.
+  void hold_on_contact(std::vector<std::int32_t> nodes) { hold_on_contact_ = std::move(nodes); }
+
   /// Where the tool tip is now (any one thread).
   void set_tool(const Eigen::Vector3d& tip_lps_mm) noexcept;
   /// The force on the tool at tip position x: the last equilibrium's force plus its stiffness
@@ -109,7 +113,7 @@ class RealtimeTissue {
  private:
   TissueModel& model_;  // the equilibrium thread's (or update_once's) only
   RealtimeOptions o_;
-  std::vector<std::int32_t> fixed_, tri_, surface_nodes_;
+  std::vector<std::int32_t> fixed_, tri_, surface_nodes_, hold_on_contact_;
   SeqLock<std::array<double, 3>> tool_;
   SeqLock<ToolContact> contact_;
   std::vector<char> is_fixed_;
