@@ -100,7 +100,6 @@ std::map<std::string, OrganPreset> parse_organ_presets(std::string_view text, st
     get(*t, organ, seen, "seat_outside_mm", p.seat_outside_mm);
     get(*t, organ, seen, "seat_min_contrast_hu", p.seat_min_contrast_hu);
     get(*t, organ, seen, "min_edge_support", p.min_edge_support);
-    get(*t, organ, seen, "edge_support_level", p.edge_support_level);
     get(*t, organ, seen, "min_area_mm2", p.min_area_mm2);
     get(*t, organ, seen, "max_area_mm2", p.max_area_mm2);
     get(*t, organ, seen, "max_area_ratio", p.max_area_ratio);

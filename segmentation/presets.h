@@ -33,8 +33,7 @@ struct OrganPreset {
   double seat_sigma_mm = 0.7;                 ///< smoothing of the HU profile it follows, mm
   double seat_outside_mm = 2.0;               ///< where "outside" is sampled beyond the band, mm
   double seat_min_contrast_hu = 20;           ///< no seating where the outside differs less from the organ
-  double min_edge_support = 0;                ///< propagation stops when a smaller fraction of the contour lies on an edge
-  double edge_support_level = 0.05;           ///< edge-map value (0–1) that counts as an edge for that test
+  double min_edge_support = 0;                ///< propagation stops when a smaller fraction of the contour has a visible wall outside it
   double edge_stop = 0;                       ///< edge-map value (0–1) at which the outward pressure halves; 0 = off
   double min_area_mm2 = 15, max_area_mm2 = 2600;  ///< per-slice lumen/organ area limits, mm²
   double max_area_ratio = 1.8;                ///< largest area ratio between neighbouring slices
