@@ -102,7 +102,7 @@ int cmd_snapshot(const std::string& out_arg, const std::vector<std::string>& vie
 }
 
 struct PreviewFlags {
-  std::string out, size, path, mode = "mixed", screenshot, fe, fe_elements = "linear";
+  std::string out, size, path, mode = "mixed", screenshot, fe, fe_elements = "linear", trajectory;
   std::vector<double> start;
   double quit_after_s = 0;
   double rate_Hz = 1000.0;
@@ -121,6 +121,11 @@ int cmd_preview(const PreviewFlags& f) {
   }
   options.on_event = [](const std::string& e) { std::cout << "preview: " << e << std::endl; };
   PreviewHaptics haptics;
+  std::optional<physics::ScriptedDevice> hand_path;
+  if (!f.trajectory.empty()) {
+    hand_path.emplace(physics::ScriptedDevice::read_csv(f.trajectory));
+    haptics.hand_path = &*hand_path;
+  }
   haptics.loop.mode = physics::parse_force_mode(f.mode);
   haptics.loop.rate_Hz = f.rate_Hz;
   physics::validate(haptics.loop);
@@ -289,6 +294,10 @@ std::vector<Command> viewer_commands(CLI::App& app) {
   prev->add_option("--start", pa->start, "where the hand and tool start, LPS mm (x,y,z; default: beside the guidance path, else in front of the first organ)")
       ->delimiter(',');
   prev->add_option("--screenshot", pa->screenshot, "save the window as this PNG when it closes (with --quit-after: a picture for documents)");
+  prev->add_option("--trajectory", pa->trajectory,
+                   "a recorded hand path (CSV t_s,x,y,z; seconds from when the window opens, LPS mm; as `haptics "
+                   "--trajectory` takes) moves the hand instead of the mouse: demonstrations, and the frame rate and "
+                   "loop figures measured with the window drawing (bench/physics/realtime_tissue.sh)");
   prev->add_option("--quit-after", pa->quit_after_s, "close the window after this many seconds (0 = never)")
       ->check(CLI::NonNegativeNumber);
   commands.push_back({prev, [pa] { return cmd_preview(*pa); }});

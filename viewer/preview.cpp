@@ -58,16 +58,27 @@ using Clock = std::chrono::steady_clock;
 /// The mouse as a haptic device: the window's thread stores the pointer's position in the scene
 /// (a single writer), the loop thread reads it lock-free at 1 kHz. A mouse pushes nothing back,
 /// so the loop moves the displayed tool by the force instead (renders_force() is false).
+/// With a recorded hand path (`script`) the path moves the hand instead and the mouse only turns
+/// the view: the loop thread is then the single writer.
 class MouseDevice final : public physics::HapticDevice {
  public:
-  explicit MouseDevice(const Eigen::Vector3d& start) : target_(physics::to_vec3(start)) {}
-  Eigen::Vector3d position_lps_mm(double) noexcept override { return physics::to_eigen(target_.read()); }
-  /// Window thread only.
-  void set(const Eigen::Vector3d& p) noexcept { target_.write(physics::to_vec3(p)); }
+  MouseDevice(const Eigen::Vector3d& start, physics::ScriptedDevice* script)
+      : target_(physics::to_vec3(script ? script->position_lps_mm(0.0) : start)), script_(script) {}
+  Eigen::Vector3d position_lps_mm(double t_s) noexcept override {
+    if (!script_) return physics::to_eigen(target_.read());
+    const Eigen::Vector3d p = script_->position_lps_mm(t_s);
+    target_.write(physics::to_vec3(p));
+    return p;
+  }
+  /// Window thread only; ignored while a recorded path moves the hand.
+  void set(const Eigen::Vector3d& p) noexcept {
+    if (!script_) target_.write(physics::to_vec3(p));
+  }
   Eigen::Vector3d get() const noexcept { return physics::to_eigen(target_.read()); }
 
  private:
   SeqLock<physics::Vec3> target_;
+  physics::ScriptedDevice* script_ = nullptr;
 };
 
 /// A drawn organ surface that the tool dents: the deformer's vertices go into the VTK points,
@@ -240,11 +251,12 @@ struct PreviewState {
     char b[400];
     std::snprintf(b, sizeof b,
                   " (render: mean %.1f fps, slowest half-second %.1f fps, mean frame %.1f ms, %ld frames; "
-                  "process CPU %.2f cores; haptic loop %.0f Hz, %llu ticks, %llu overruns)",
+                  "process CPU %.2f cores; haptic loop %.0f Hz, %llu ticks, %llu overruns, tick p99 %.1f us, "
+                  "jitter p99 %.1f us)",
                   t > 0 ? total_frames / t : 0.0, fps_min < 1e9 ? fps_min : 0.0,
                   total_frames > 0 ? render_ms_sum / total_frames : 0.0, total_frames,
                   t > 0 ? cpu / (1e3 * t) : 0.0, ls.rate_Hz, (unsigned long long)ls.ticks,
-                  (unsigned long long)ls.overruns);
+                  (unsigned long long)ls.overruns, ls.compute_us.p99, ls.jitter_us.p99);
     return b;
   }
 
@@ -505,6 +517,7 @@ void on_timer(vtkObject*, unsigned long, void* client, void*) {
   s->render_ms_sum += std::chrono::duration<double, std::milli>(Clock::now() - r0).count();
   if (s->options.quit_after_s > 0 &&
       std::chrono::duration<double>(now - s->started).count() >= s->options.quit_after_s) {
+    s->emit(s->status());  // where the hand and tool ended (a recorded hand path's end, for one)
     s->emit("quit after " + std::to_string(int(s->options.quit_after_s)) + " s" + s->stats());
     s->renderer->GetRenderWindow()->GetInteractor()->TerminateApp();
   }
@@ -751,7 +764,7 @@ void run_preview(const SnapshotScene& scene, const PreviewOptions& options, cons
   state.mode_label = mode_label;
   state.corner = corner;
 
-  MouseDevice device(start);
+  MouseDevice device(start, haptics.hand_path);
   physics::HapticLoop loop(device, haptics.path, haptics.contact, haptics.loop);
   loop.set_reaction_source(haptics.tissue_reaction);
   state.device = &device;

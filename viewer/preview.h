@@ -60,6 +60,10 @@ struct PreviewHaptics {
   std::vector<std::int32_t> tissue_triangles;  ///< its outer surface: node ids, three per face, outward
   std::vector<std::int32_t> tissue_fixed_nodes;  ///< reported in the status (their largest displacement)
   std::string tissue_organ;                      ///< the organ it is: its drawn surface is replaced
+  /// A recorded hand path that moves the hand instead of the mouse (times from when the loop
+  /// starts, about when the window opens; held at its end): demonstrations and benchmarks with
+  /// the window drawing. The mouse still turns the view. Must outlive run_preview().
+  physics::ScriptedDevice* hand_path = nullptr;
 };
 
 /// Opens the preview window on `scene`, runs the haptic loop while it is open, and returns when

@@ -168,7 +168,22 @@ bool RealtimeTissue::solve_once() {
     contact_.write(c);
     return false;
   }
+  // Withdrawn: the tool is back at or outside the surface's rest position along the grip's normal
+  // (or gone); the organ lets go (let_go: at rest). An increment in progress is abandoned as soon as
+  // the tool gets there.
+  auto withdrawn = [this] {
+    const auto p = tool_.read();
+    const Eigen::Vector3d x(p[0], p[1], p[2]);
+    return !(x.allFinite() && x.norm() < 1e20) || (x + grip_offset_).dot(grip_normal_) >= 0.0;
+  };
+  if (gripping_ && withdrawn()) {
+    let_go();
+    spent_ms_ += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    publish(c);
+    return true;
+  }
   NewtonOptions no;
+  if (gripping_) no.abandon = withdrawn;
   no.max_iterations = o_.iterations_per_equilibrium;
   no.force_tolerance_N = 1e-9;  // the organ at rest: soft walls (μ ≈ 100 Pa) move 0.05 mm under 10⁻⁷ N
   no.relative_tolerance = 1e-3;
@@ -183,6 +198,10 @@ bool RealtimeTissue::solve_once() {
   }
   const Eigen::VectorXd from = model_.displacement_mm();
   const NewtonReport rep = model_.solve_static_quasi_newton(target, no);
+  if (!rep.converged && gripping_ && withdrawn()) {  // abandoned: the next call lets go
+    model_.set_displacement_mm(from);
+    return true;
+  }
   if (!rep.converged) {
     model_.set_displacement_mm(from);
     increment_mm_ = std::max(0.05 * o_.max_increment_mm, 0.5 * increment_mm_);
@@ -195,9 +214,8 @@ bool RealtimeTissue::solve_once() {
   if (gripping_) {
     const Eigen::Vector3d F = -model_.held_force_N();
     if (!F.allFinite() || !(F.dot(grip_normal_) > 0)) {  // the tissue would pull the tool: let go
-      gripping_ = false;
-      model_.set_boundary(fixed_, {});
-      contact_.write(c);
+      let_go();
+      publish(c);
       return true;
     }
     c.in_contact = true;
@@ -211,6 +229,19 @@ bool RealtimeTissue::solve_once() {
   } else {
     settled_ = true;
   }
+  publish(c);
+  return true;
+}
+
+void RealtimeTissue::let_go() {
+  gripping_ = false;
+  held_.setZero();
+  model_.set_boundary(fixed_, {});
+  model_.set_displacement_mm(Eigen::VectorXd::Zero(model_.displacement_mm().size()));
+  settled_ = true;
+}
+
+void RealtimeTissue::publish(ToolContact c) {
   c.update = equilibria_.load() + 1;
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
@@ -228,7 +259,6 @@ bool RealtimeTissue::solve_once() {
   }
   spent_ms_ = 0.0;
   equilibria_.fetch_add(1);
-  return true;
 }
 
 void RealtimeTissue::update_display() {

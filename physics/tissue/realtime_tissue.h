@@ -2,9 +2,8 @@
 // The organ in the haptic loop, in two rates (the multirate scheme of the haptics literature):
 //
 // - Equilibrium (its own thread, as fast as it goes): the TissueModel's nonlinear quasi-static
-//   equilibrium with the tool's grip where the tool is, by Newton's method reusing its factorised
-//   tangent while that contracts (TissueModel::step_dynamic_reusing_tangent with no inertia). Each
-//   converged state is published with its held-set stiffness and its response
+//   equilibrium with the tool's grip where the tool is, in increments toward it, each by BFGS on
+//   the last factorised tangent (TissueModel::solve_static_quasi_newton). Each converged state is published with its held-set stiffness and its response
 //   (TissueModel::held_response): how every node moves, to first order, when the grip moves.
 // - Update (60 Hz, its own thread): the deformation the display draws is the last equilibrium
 //   plus its response to the tool's motion since (a 3-column product: microseconds).
@@ -18,7 +17,8 @@
 // Contact: the tool tip is a sphere. When it touches the deformed outer surface, the surface
 // faces under a disc about the contact point (as the simulate stage's 5 mm probe holds its faces)
 // are held to the tool and follow its motion from there; they let go when the tissue would pull
-// the tool (the tool withdrawn). The held nodes are where the tool is, so the tool never passes
+// the tool or the tool is back at the surface's rest position (then the organ is at rest: it
+// carries no other load). The held nodes are where the tool is, so the tool never passes
 // through the surface. Where the touched nodes are all fixed (the liver bed, a cut end) the
 // tissue cannot give way: the tool meets a stiff wall there instead.
 //
@@ -160,6 +160,12 @@ class RealtimeTissue {
   /// One step of the equilibrium thread: contact, one increment toward the tool, publication.
   /// False when there was nothing to do (no contact, at rest).
   bool solve_once();
+  /// The tool lets go: the model carries no load but the tool's, so the equilibrium without it is
+  /// the rest state, exactly (the hyperelastic energy is ≥ 0 and 0 only at a rigid motion, which
+  /// the fixed sets hold at u = 0): no solve.
+  void let_go();
+  /// The model's state as the last equilibrium (for the update) and `c` (for the force loop).
+  void publish(ToolContact c);
   void update_display();
 };
 

@@ -480,6 +480,7 @@ NewtonReport TissueModel::newton(const Eigen::Vector3d& held_mm, double dt, cons
     return rep;
   }
   for (rep.iterations = 0; rep.iterations < o.max_iterations; ++rep.iterations) {
+    if (o.abandon && o.abandon()) return rep;
     // Prescribed increments of the constrained DOFs, eliminated into the right-hand side.
     Eigen::VectorXd dc = Eigen::VectorXd::Zero(3 * n);
     double cgap = 0.0;
@@ -599,6 +600,7 @@ NewtonReport TissueModel::solve_static_quasi_newton(const Eigen::Vector3d& held_
   Eigen::VectorXd r(nd), g(nd), g_prev, u_prev, dir(nd), q(nd), rhs(nd);
   double phi = 0.0;
   for (int round = 0; round < 3; ++round) {
+    if (o.abandon && o.abandon()) return rep;
     if (!I.factor_valid || I.factor_boundary != boundary_version_ || I.factor_dt != 0.0 || round > 0) {
       const NewtonReport full = newton(held_mm, 0.0, one);  // factorises, moves the held set
       rep.refreshed = true;
@@ -615,6 +617,7 @@ NewtonReport TissueModel::solve_static_quasi_newton(const Eigen::Vector3d& held_
     constexpr std::size_t kPairs = 12;
     bool first = true;
     for (int it = 0; it < o.max_iterations; ++it) {
+      if (o.abandon && o.abandon()) return rep;
       if (!I.evaluate(mesh_, u_, phi, r, nullptr)) break;  // an element inverted: refactorise from the last state
       I.f = r;
       g = r;

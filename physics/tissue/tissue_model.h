@@ -21,6 +21,7 @@
 
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <vector>
 
@@ -42,6 +43,9 @@ struct NewtonOptions {
   int max_iterations = 25;
   double force_tolerance_N = 1e-7;   ///< largest free residual component
   double relative_tolerance = 1e-6;  ///< … or this fraction of the held set's force
+  /// Asked before each iteration: true stops the solve unconverged (the caller's question has
+  /// changed, e.g. the tool was withdrawn). Empty: never.
+  std::function<bool()> abandon;
 };
 
 struct NewtonReport {

@@ -299,9 +299,11 @@ TEST(Simulate, TracheaPressedOnItsAnteriorWall) {
   const nlohmann::json h = read_json(tmp / "indent.json");
   ASSERT_TRUE(h.contains("solver_curve")) << h.dump(2);
   EXPECT_LT(h["solver_curve"]["largest_relative_difference_past_20pct_depth"].get<double>(), 0.01) << h["solver_curve"].dump(2);
-  // The real-time press is reported, not checked here: a tube's wall is meshed at its thickness, and
-  // this 10-node model's equilibria come too seldom for the quasi-static speed (TISSUE.md).
+  // The real-time press's felt curve is reported, not checked here: a tube's wall is meshed at its
+  // thickness, and this 10-node model's equilibria come seldom for the quasi-static speed (10–14 %
+  // against the 15 %, TISSUE.md). Withdrawn, the tool lets go and the wall is at rest.
   const nlohmann::json& press = h["fe"]["press"];
+  EXPECT_LT(press["rest_fraction_of_depth"].get<double>(), 0.01) << h["fe"].dump(2);
   std::printf("trachea probe: %zu points to %.3g mm, %.3g N; haptics --indent within %.2g of CalculiX past 20 %% of the "
               "depth; real-time model %d nodes, equilibria %.3g Hz, force felt within %.3g of CalculiX, rest %.3g of the depth\n",
               curve.size(), ind["depth_mm"].get<double>(), curve.back()[1].get<double>(),

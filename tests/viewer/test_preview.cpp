@@ -299,6 +299,39 @@ TEST(Preview, MouseMovesTheToolKeysSwitchTheModeAndGuidancePullsTheTool) {
   EXPECT_GT(std::atof(log.c_str() + num_at + 2), 1000.0) << "the haptic loop hardly ran: " << log;
 }
 
+// A recorded hand path (--trajectory) moves the hand instead of the mouse: 20 mm along x in the
+// first second, then held; away from every organ the tool is where the hand is. The closing line
+// carries the loop's tick and jitter percentiles (the benchmark reads them).
+TEST(Preview, ARecordedHandPathMovesTheHand) {
+  DisplayOptions dopt;
+  dopt.private_xvfb = true;
+  DisplaySession session(dopt);
+  ScratchDir out("viewer-preview-path");
+  fs::copy(small_phantom_dir(), out / "phantom", fs::copy_options::recursive);
+  {
+    std::ofstream t(out / "hand.csv");
+    t << "t_s,x,y,z\n0,400,400,400\n1,420,400,400\n";
+  }
+  PreviewProcess preview(session.name(), "'" + out.path().string() + "' --size 640x480 --mode reaction --trajectory '" +
+                                             (out / "hand.csv").string() + "' --quit-after 3");
+  ASSERT_NE(preview.proc, nullptr);
+  const std::string status = preview.read_until("preview: status");
+  ASSERT_FALSE(status.empty()) << preview.log;
+  const int rc = preview.finish();
+  EXPECT_TRUE(WIFEXITED(rc) && WEXITSTATUS(rc) == 0) << preview.log;
+  double hx = 0, hy = 0, hz = 0, tx = 0, ty = 0, tz = 0;
+  const auto h = status.find("hand_lps_mm="), t = status.find("tool_lps_mm=");
+  ASSERT_TRUE(h != std::string::npos && t != std::string::npos) << status;
+  ASSERT_EQ(std::sscanf(status.c_str() + h, "hand_lps_mm=%lf,%lf,%lf", &hx, &hy, &hz), 3) << status;
+  ASSERT_EQ(std::sscanf(status.c_str() + t, "tool_lps_mm=%lf,%lf,%lf", &tx, &ty, &tz), 3) << status;
+  EXPECT_NEAR(hx, 420.0, 0.01) << "the hand is not at the path's end: " << status;
+  EXPECT_NEAR(hy, 400.0, 0.01) << status;
+  EXPECT_NEAR(hz, 400.0, 0.01) << status;
+  EXPECT_NEAR((Eigen::Vector3d(tx, ty, tz) - Eigen::Vector3d(hx, hy, hz)).norm(), 0.0, 0.05) << status;
+  EXPECT_NE(preview.log.find("tick p99 "), std::string::npos) << preview.log;
+  EXPECT_NE(preview.log.find("jitter p99 "), std::string::npos) << preview.log;
+}
+
 // The gallbladder felt and drawn through its real-time finite-element model: the wheel pushes the
 // hand (and the tool behind it) into the organ; the drawn surface moves most where the tool is,
 // the fixed set (liver bed) does not move, and the FE thread, the 1 kHz loop and the window keep
