@@ -475,6 +475,7 @@ class PreviewStyle : public vtkInteractorStyleTrackballCamera {
       state->renderer->GetActiveCamera()->Zoom(0.85);
       this->Interactor->Render();
     } else if (key == 'q' || key == 'Q' || sym == "Escape") {
+      state->loop->stop();  // its tick percentiles are taken once it has stopped
       state->emit("quit" + state->stats());
       this->Interactor->TerminateApp();
     }
@@ -518,6 +519,7 @@ void on_timer(vtkObject*, unsigned long, void* client, void*) {
   if (s->options.quit_after_s > 0 &&
       std::chrono::duration<double>(now - s->started).count() >= s->options.quit_after_s) {
     s->emit(s->status());  // where the hand and tool ended (a recorded hand path's end, for one)
+    s->loop->stop();
     s->emit("quit after " + std::to_string(int(s->options.quit_after_s)) + " s" + s->stats());
     s->renderer->GetRenderWindow()->GetInteractor()->TerminateApp();
   }
