@@ -6,9 +6,9 @@
 // medians are compared. The byte reader uses the same TBB parallelism as ingest.
 
 #include "core/progress.h"
-#include "pipeline/dicom.h"
-#include "pipeline/ingest.h"
-#include "pipeline/phantom.h"
+#include "pipeline/io/dicom.h"
+#include "pipeline/io/ingest.h"
+#include "pipeline/phantom/phantom.h"
 
 #include <fcntl.h>
 #include <tbb/parallel_for.h>

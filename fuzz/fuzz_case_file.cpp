@@ -1,8 +1,8 @@
-// libFuzzer target: the case-file parser (pipeline/case_file.h: TOML, every [stages.*] option
+// libFuzzer target: the case-file parser (pipeline/case/case_file.h: TOML, every [stages.*] option
 // typed and range-checked, organs from the registry) on any text. It must return a case or
 // throw organsmith's own error; never crash or hang.
 #include "core/errors.h"
-#include "pipeline/case_file.h"
+#include "pipeline/case/case_file.h"
 
 #include <string>
 

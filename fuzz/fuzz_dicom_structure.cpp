@@ -1,7 +1,7 @@
-// libFuzzer target: the DICOM byte-structure check (pipeline/dicom_structure.h) on any bytes.
+// libFuzzer target: the DICOM byte-structure check (pipeline/io/dicom_structure.h) on any bytes.
 // It must return, never crash, hang or read out of bounds; a verdict of "complete with native
 // pixel data" must point inside the input.
-#include "pipeline/dicom_structure.h"
+#include "pipeline/io/dicom_structure.h"
 
 #include <cstdlib>
 

@@ -1,8 +1,8 @@
-// libFuzzer target: the NIfTI header check (pipeline/nifti_check.h) on any bytes, as a .nii and
+// libFuzzer target: the NIfTI header check (pipeline/io/nifti_check.h) on any bytes, as a .nii and
 // as a .nii.gz file. It must accept or throw organsmith's own errors, never crash or hang, and an
 // accepted header must describe a volume that fits the memory budget given.
 #include "core/errors.h"
-#include "pipeline/nifti_check.h"
+#include "pipeline/io/nifti_check.h"
 
 #include <unistd.h>
 

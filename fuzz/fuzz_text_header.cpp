@@ -1,8 +1,8 @@
-// libFuzzer target: the NRRD and MetaImage header checks (pipeline/text_header_check.h) on any
+// libFuzzer target: the NRRD and MetaImage header checks (pipeline/io/text_header_check.h) on any
 // bytes, as a .nrrd and as a .mha file. They must accept or throw organsmith's own errors; never
 // crash, hang or allocate what a header announces.
 #include "core/errors.h"
-#include "pipeline/text_header_check.h"
+#include "pipeline/io/text_header_check.h"
 
 #include <unistd.h>
 

@@ -1,4 +1,4 @@
-#include "segmentation/region3d.h"
+#include "segmentation/detail/region3d.h"
 
 #include "segmentation/edge_map.h"
 #include "segmentation/slice_ops.h"

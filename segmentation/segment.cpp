@@ -5,7 +5,7 @@
 #include "segmentation/edge_map.h"
 #include "segmentation/gvf.h"
 #include "segmentation/presets.h"
-#include "segmentation/region3d.h"
+#include "segmentation/detail/region3d.h"
 #include "segmentation/slice_ops.h"
 #include "segmentation/snake.h"
 #include "segmentation/surface3d.h"

@@ -41,7 +41,7 @@ struct PreviewOptions {
   std::function<void(const std::string&)> on_event;
 };
 
-/// The force model the preview drives. Built by the caller (e.g. pipeline/cmd_viewer.cpp from a
+/// The force model the preview drives. Built by the caller (e.g. pipeline/cli/cmd_viewer.cpp from a
 /// run's output directory); everything pointed to must outlive run_preview().
 struct PreviewHaptics {
   const physics::PathIndex* path = nullptr;        ///< guidance path (null: no guidance force)

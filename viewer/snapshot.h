@@ -47,7 +47,7 @@ struct SnapshotOptions {
 std::vector<std::string> snapshot_view_names(const SnapshotScene& scene, const SnapshotOptions& options);
 
 /// Renders every view of snapshot_view_names() into `dir`/<name>.png and returns the paths.
-/// Writes in place: the caller stages `dir` and commits it (see pipeline/runner.h). Opens one
+/// Writes in place: the caller stages `dir` and commits it (see pipeline/run/runner.h). Opens one
 /// display session for all views. Throws DisplayError when nothing can render, OutputError when
 /// a PNG cannot be written, Cancelled when `progress` asks to stop.
 std::vector<std::filesystem::path> render_snapshots(const SnapshotScene& scene, const SnapshotOptions& options,

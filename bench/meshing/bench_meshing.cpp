@@ -6,8 +6,8 @@
 #include "core/memory.h"
 #include "core/progress.h"
 #include "meshing/mesh.h"
-#include "pipeline/organ_registry.h"
-#include "pipeline/phantom.h"
+#include "pipeline/case/organ_registry.h"
+#include "pipeline/phantom/phantom.h"
 
 #include <vtkFlyingEdges3D.h>
 #include <vtkImageData.h>

@@ -3,7 +3,7 @@
 // and iteration count. Prints times, the speed-up and the agreement of the fields.
 
 #include "core/progress.h"
-#include "pipeline/phantom.h"
+#include "pipeline/phantom/phantom.h"
 #include "segmentation/edge_map.h"
 #include "segmentation/gvf.h"
 #include "segmentation/gvf_itk_reference.h"

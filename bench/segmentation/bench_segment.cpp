@@ -2,7 +2,7 @@
 // Target: ≤ 2 s on two cores (issue 15: robustness work must not slow it; was ≤ 10 s).
 
 #include "core/progress.h"
-#include "pipeline/phantom.h"
+#include "pipeline/phantom/phantom.h"
 #include "segmentation/segment.h"
 
 #include <chrono>

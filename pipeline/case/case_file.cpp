@@ -1,13 +1,13 @@
 // Case files: parsing and validating every table of a case, and its JSON form. Over 400 lines for a
 // reason: it is the one place that knows every key a case may hold and checks each against its
 // rules, so that an unknown or wrong key never falls back to a default silently.
-#include "pipeline/case_file.h"
+#include "pipeline/case/case_file.h"
 
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/toml_parse.h"
 #include "default_case_toml.h"  // generated from data/default_case.toml
-#include "pipeline/stage_options_toml.h"
+#include "pipeline/case/stage_options_toml.h"
 #include "pacs/pacs.h"
 #include "segmentation/presets.h"
 

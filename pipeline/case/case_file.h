@@ -2,10 +2,10 @@
 // Case files (TOML): what to read, which organs to model with which seeds, stage options.
 // The full reference is in README.md ("Case file").
 
-#include "pipeline/ingest.h"
-#include "pipeline/organ_registry.h"
-#include "pipeline/phantom.h"
-#include "pipeline/stage_options.h"
+#include "pipeline/io/ingest.h"
+#include "pipeline/case/organ_registry.h"
+#include "pipeline/phantom/phantom.h"
+#include "pipeline/case/stage_options.h"
 
 #include <Eigen/Core>
 #include <nlohmann/json.hpp>

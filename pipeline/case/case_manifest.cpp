@@ -3,9 +3,9 @@
 // written by hand.
 
 #include "core/errors.h"
-#include "pipeline/case_file.h"
-#include "pipeline/output_dir.h"
-#include "pipeline/output_layout.h"
+#include "pipeline/case/case_file.h"
+#include "pipeline/output/output_dir.h"
+#include "pipeline/output/output_layout.h"
 
 #include <toml++/toml.h>
 

@@ -1,14 +1,14 @@
 // Over 400 lines: the organ registry (its TOML reader and checks) and the organ regions' materials as
 // solver fits and bands, with their JSON for materials.json; one reader of data/organs.toml and its users.
-#include "pipeline/organ_registry.h"
+#include "pipeline/case/organ_registry.h"
 
 #include "core/errors.h"
 #include "core/toml_parse.h"
 #include "physics/materials/presets.h"
 #include "physics/materials/material_band.h"
 #include "physics/materials/solver_fit.h"
-#include "pipeline/read_manifest.h"
-#include "pipeline/stage_options.h"
+#include "pipeline/output/read_manifest.h"
+#include "pipeline/case/stage_options.h"
 #include "segmentation/presets.h"
 
 #include <fstream>

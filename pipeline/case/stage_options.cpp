@@ -1,9 +1,9 @@
-#include "pipeline/stage_options.h"
+#include "pipeline/case/stage_options.h"
 
 #include "core/errors.h"
 #include "core/format.h"
 #include "meshing/export.h"
-#include "pipeline/stage_options_toml.h"
+#include "pipeline/case/stage_options_toml.h"
 
 #include <algorithm>
 #include <cmath>

@@ -3,7 +3,7 @@
 // field below; one list of fields per stage (visit_*) serves parsing with range checks, the
 // manifest's JSON and `organsmith run --print-default-case`.
 
-#include "pipeline/guide_stage.h"
+#include "pipeline/stages/guide_stage.h"
 
 #include <nlohmann/json.hpp>
 

@@ -1,8 +1,8 @@
 #pragma once
-// Reading [stages] from a parsed case file (toml++ stays inside pipeline/case_file.cpp and
-// pipeline/stage_options.cpp).
+// Reading [stages] from a parsed case file (toml++ stays inside pipeline/case/case_file.cpp and
+// pipeline/case/stage_options.cpp).
 
-#include "pipeline/stage_options.h"
+#include "pipeline/case/stage_options.h"
 
 #include <toml++/toml.h>
 

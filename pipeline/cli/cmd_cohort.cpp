@@ -1,11 +1,11 @@
-// `organsmith cohort COHORT --out DIR`: one case over many studies (pipeline/cohort.h), and the
+// `organsmith cohort COHORT --out DIR`: one case over many studies (pipeline/cohort/cohort.h), and the
 // hidden `organsmith cohort-study DIR INDEX` that runs one study in its own process.
 
-#include "pipeline/cohort.h"
-#include "pipeline/cohort_engine.h"
-#include "pipeline/commands.h"
-#include "pipeline/output_layout.h"
-#include "pipeline/terminal_progress.h"
+#include "pipeline/cohort/cohort.h"
+#include "pipeline/cohort/cohort_engine.h"
+#include "pipeline/cli/commands.h"
+#include "pipeline/output/output_layout.h"
+#include "pipeline/run/terminal_progress.h"
 
 #include "core/errors.h"
 #include "core/file_io.h"

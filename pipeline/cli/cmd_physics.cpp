@@ -6,16 +6,16 @@
 
 #include "core/csv.h"
 #include "core/file_io.h"
-#include "pipeline/tool_info.h"
+#include "pipeline/output/tool_info.h"
 #include "core/errors.h"
 #include "core/format.h"
 #include "physics/materials/calibration.h"
 #include "physics/materials/presets.h"
 #include "physics/materials/uncertainty.h"
-#include "pipeline/commands.h"
-#include "pipeline/organ_registry.h"
-#include "pipeline/output_dir.h"
-#include "pipeline/terminal_progress.h"
+#include "pipeline/cli/commands.h"
+#include "pipeline/case/organ_registry.h"
+#include "pipeline/output/output_dir.h"
+#include "pipeline/run/terminal_progress.h"
 
 #include <nlohmann/json.hpp>
 

@@ -2,9 +2,9 @@
 // cache (pacs/pacs.h), ready as the input of `organsmith run`.
 
 #include "pacs/pacs.h"
-#include "pipeline/output_layout.h"
-#include "pipeline/commands.h"
-#include "pipeline/terminal_progress.h"
+#include "pipeline/output/output_layout.h"
+#include "pipeline/cli/commands.h"
+#include "pipeline/run/terminal_progress.h"
 
 #include "core/errors.h"
 #include "core/format.h"

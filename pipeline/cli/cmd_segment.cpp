@@ -3,12 +3,12 @@
 
 #include "core/errors.h"
 #include "core/file_io.h"
-#include "pipeline/commands.h"
-#include "pipeline/image_io.h"
-#include "pipeline/ingest.h"
-#include "pipeline/output_dir.h"
-#include "pipeline/runner.h"
-#include "pipeline/terminal_progress.h"
+#include "pipeline/cli/commands.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/ingest.h"
+#include "pipeline/output/output_dir.h"
+#include "pipeline/run/runner.h"
+#include "pipeline/run/terminal_progress.h"
 #include "segmentation/presets.h"
 #include "segmentation/segment.h"
 

@@ -1,10 +1,10 @@
-// `organsmith simulate OUT_DIR`: the simulate stage of a run's directory (see pipeline/simulate.h).
+// `organsmith simulate OUT_DIR`: the simulate stage of a run's directory (see pipeline/stages/simulate.h).
 
-#include "pipeline/case_file.h"
-#include "pipeline/commands.h"
-#include "pipeline/output_layout.h"
-#include "pipeline/runner.h"
-#include "pipeline/terminal_progress.h"
+#include "pipeline/case/case_file.h"
+#include "pipeline/cli/commands.h"
+#include "pipeline/output/output_layout.h"
+#include "pipeline/run/runner.h"
+#include "pipeline/run/terminal_progress.h"
 
 #include <nlohmann/json.hpp>
 

@@ -1,16 +1,16 @@
 // The organsmith command line.
 
 #include "core/errors.h"
-#include "pipeline/tool_info.h"
+#include "pipeline/output/tool_info.h"
 #include "core/format.h"
-#include "pipeline/case_file.h"
-#include "pipeline/commands.h"
-#include "pipeline/ingest.h"
-#include "pipeline/output_dir.h"
-#include "pipeline/phantom.h"
-#include "pipeline/phantom_files.h"
-#include "pipeline/runner.h"
-#include "pipeline/terminal_progress.h"
+#include "pipeline/case/case_file.h"
+#include "pipeline/cli/commands.h"
+#include "pipeline/io/ingest.h"
+#include "pipeline/output/output_dir.h"
+#include "pipeline/phantom/phantom.h"
+#include "pipeline/phantom/phantom_files.h"
+#include "pipeline/run/runner.h"
+#include "pipeline/run/terminal_progress.h"
 
 #include <cmath>
 #include <CLI/CLI.hpp>

@@ -1,13 +1,13 @@
 // Cohort files: reading, validating and resolving each row into the study's complete case.
-#include "pipeline/cohort.h"
-#include "pipeline/tool_info.h"
+#include "pipeline/cohort/cohort.h"
+#include "pipeline/output/tool_info.h"
 
 #include "core/csv.h"
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/sha256.h"
 #include "core/toml_parse.h"
-#include "pipeline/case_file.h"
+#include "pipeline/case/case_file.h"
 
 #include <toml++/toml.h>
 

@@ -1,16 +1,16 @@
 // A cohort's run: reuse of completed studies, the local process pool, retries, progress and the
 // summary at the end (the Slurm engine is in cohort_slurm.cpp).
-#include "pipeline/cohort_engine.h"
-#include "pipeline/tool_info.h"
-#include "pipeline/cohort_engine_detail.h"
+#include "pipeline/cohort/cohort_engine.h"
+#include "pipeline/output/tool_info.h"
+#include "pipeline/cohort/cohort_engine_detail.h"
 
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/format.h"
 #include "core/process.h"
-#include "pipeline/cohort_summary.h"
-#include "pipeline/output_dir.h"
-#include "pipeline/output_layout.h"
+#include "pipeline/cohort/cohort_summary.h"
+#include "pipeline/output/output_dir.h"
+#include "pipeline/output/output_layout.h"
 
 #include <spdlog/spdlog.h>
 

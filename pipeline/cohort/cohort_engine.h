@@ -3,7 +3,7 @@
 // completed studies, and the summary at the end.
 
 #include "core/progress.h"
-#include "pipeline/cohort.h"
+#include "pipeline/cohort/cohort.h"
 
 #include <string>
 #include <vector>

@@ -2,8 +2,8 @@
 // What the two cohort engines share (cohort_engine.cpp: the local pool and the run; cohort_slurm.cpp:
 // the Slurm job arrays). Internal to the cohort code.
 
-#include "pipeline/cohort.h"
-#include "pipeline/cohort_engine.h"
+#include "pipeline/cohort/cohort.h"
+#include "pipeline/cohort/cohort_engine.h"
 
 #include <chrono>
 #include <optional>

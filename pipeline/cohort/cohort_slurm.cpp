@@ -5,8 +5,8 @@
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/process.h"
-#include "pipeline/cohort_engine_detail.h"
-#include "pipeline/output_layout.h"
+#include "pipeline/cohort/cohort_engine_detail.h"
+#include "pipeline/output/output_layout.h"
 
 #include <nlohmann/json.hpp>
 #include <spdlog/spdlog.h>

@@ -2,11 +2,11 @@
 // task run (`organsmith cohort-study DIR INDEX`).
 #include "core/errors.h"
 #include "core/file_io.h"
-#include "pipeline/case_file.h"
-#include "pipeline/cohort.h"
-#include "pipeline/output_layout.h"
-#include "pipeline/runner.h"
-#include "pipeline/terminal_progress.h"
+#include "pipeline/case/case_file.h"
+#include "pipeline/cohort/cohort.h"
+#include "pipeline/output/output_layout.h"
+#include "pipeline/run/runner.h"
+#include "pipeline/run/terminal_progress.h"
 
 #include <spdlog/spdlog.h>
 

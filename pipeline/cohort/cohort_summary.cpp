@@ -1,13 +1,14 @@
-#include "pipeline/cohort_summary.h"
+#include "pipeline/cohort/cohort_summary.h"
 
 #include "core/csv.h"
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/format.h"
 #include "core/memory.h"
-#include "pipeline/case_file.h"
-#include "pipeline/image_io.h"
-#include "pipeline/output_layout.h"
+#include "pipeline/case/case_file.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/output/output_layout.h"
+#include "pipeline/output/read_manifest.h"
 #include "viewer/contact_sheet.h"
 
 #include <spdlog/spdlog.h>
@@ -114,7 +115,7 @@ nlohmann::json cohort_summary_json(const CohortPlan& plan, const CohortResult& r
     nlohmann::json st = {{"id", s.id}, {"state", o.state}, {"exit_code", o.exit_code}, {"attempts", o.attempts},
                          {"message", o.message}};
     const OutputLayout out{layout.study(s.id)};
-    const auto manifest = read_json_or_null(out.manifest());
+    const auto manifest = read_manifest(out.root).value_or(nlohmann::json());
     double seconds = 0, rss = 0;
     nlohmann::json stages = nlohmann::json::object();
     if (manifest.is_object() && manifest.contains("stages"))

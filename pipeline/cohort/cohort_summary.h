@@ -5,8 +5,8 @@
 // patient data appear in any of them.
 
 #include "core/progress.h"
-#include "pipeline/cohort.h"
-#include "pipeline/cohort_engine.h"
+#include "pipeline/cohort/cohort.h"
+#include "pipeline/cohort/cohort_engine.h"
 
 #include <filesystem>
 

@@ -1,7 +1,7 @@
 #pragma once
 // DICOM reading and writing (GDCM stays inside dicom_read.cpp / dicom_write.cpp).
 
-#include "pipeline/ingest.h"
+#include "pipeline/io/ingest.h"
 
 #include <Eigen/Core>
 

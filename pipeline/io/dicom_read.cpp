@@ -8,8 +8,8 @@
 
 #include "core/errors.h"
 #include "core/memory.h"
-#include "pipeline/dicom.h"
-#include "pipeline/dicom_structure.h"
+#include "pipeline/io/dicom.h"
+#include "pipeline/io/dicom_structure.h"
 
 #include <gdcmAttribute.h>
 #include <gdcmImage.h>
@@ -112,7 +112,7 @@ int us_value(const gdcm::DataSet& ds) {
 
 
 /// Checks the byte structure of a Part-10 file up to and including the pixel data
-/// (pipeline/dicom_structure.h): GDCM aborts on some truncated files, so truncation must be
+/// (pipeline/io/dicom_structure.h): GDCM aborts on some truncated files, so truncation must be
 /// caught before GDCM sees the file.
 bool structurally_complete(const fs::path& path, std::string& why, PixelLocation& pixels) {
   const DicomStructure st = check_dicom_structure(path);

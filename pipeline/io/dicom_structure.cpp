@@ -1,4 +1,4 @@
-#include "pipeline/dicom_structure.h"
+#include "pipeline/io/dicom_structure.h"
 
 #include <zlib.h>
 

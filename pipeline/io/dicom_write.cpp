@@ -2,7 +2,7 @@
 
 #include "core/errors.h"
 #include "core/sha256.h"
-#include "pipeline/dicom.h"
+#include "pipeline/io/dicom.h"
 
 #include <gdcmImage.h>
 #include <gdcmImageWriter.h>

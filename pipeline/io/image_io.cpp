@@ -1,9 +1,9 @@
-#include "pipeline/image_io.h"
+#include "pipeline/io/image_io.h"
 
 #include "core/errors.h"
-#include "pipeline/itk_image_io.h"
-#include "pipeline/nifti_check.h"
-#include "pipeline/text_header_check.h"
+#include "pipeline/io/itk_image_io.h"
+#include "pipeline/io/nifti_check.h"
+#include "pipeline/io/text_header_check.h"
 #include "core/memory.h"
 
 #include <algorithm>

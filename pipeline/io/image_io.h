@@ -16,7 +16,7 @@ std::string volume_file_format(const std::filesystem::path& path);
 
 /// Reads a scalar volume (values taken as HU; NIfTI scl_slope/inter applied). Geometry is
 /// converted to LPS. Throws InputError when the file cannot be read.
-/// A NIfTI file's header and data length are checked first (pipeline/nifti_check.h) against
+/// A NIfTI file's header and data length are checked first (pipeline/io/nifti_check.h) against
 /// `max_memory_bytes` (0 = 60 % of physical memory).
 Volume read_volume_file(const std::filesystem::path& path, std::int64_t max_memory_bytes = 0);
 /// Reads a label map (values cast to uint8; throws when a value is outside 0–255).
@@ -28,7 +28,7 @@ LabelMap read_label_map(const std::filesystem::path& path);
 double merge_organ_from_label_map(LabelMap& labels, const LabelMap& source, std::uint8_t label);
 
 /// Writes a volume as float (format from the extension). Not atomic: callers write into a
-/// staging directory (see pipeline/output_dir.h).
+/// staging directory (see pipeline/output/output_dir.h).
 void write_volume_file(const Volume& volume, const std::filesystem::path& path);
 /// Writes a label map as uint8 (format from the extension; .nii.gz for stage outputs).
 void write_label_map(const LabelMap& labels, const std::filesystem::path& path);

@@ -1,9 +1,9 @@
-#include "pipeline/ingest.h"
+#include "pipeline/io/ingest.h"
 
 #include "core/errors.h"
 #include "core/sha256.h"
-#include "pipeline/dicom.h"
-#include "pipeline/image_io.h"
+#include "pipeline/io/dicom.h"
+#include "pipeline/io/image_io.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,4 +1,4 @@
-#include "pipeline/itk_image_io.h"
+#include "pipeline/io/itk_image_io.h"
 
 #include "core/errors.h"
 

@@ -1,4 +1,4 @@
-#include "pipeline/nifti_check.h"
+#include "pipeline/io/nifti_check.h"
 
 #include "core/errors.h"
 

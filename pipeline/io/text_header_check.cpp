@@ -1,4 +1,4 @@
-#include "pipeline/text_header_check.h"
+#include "pipeline/io/text_header_check.h"
 
 #include "core/errors.h"
 

@@ -1,10 +1,10 @@
-#include "pipeline/output_dir.h"
+#include "pipeline/output/output_dir.h"
 
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/sha256.h"
-#include "pipeline/output_layout.h"
-#include "pipeline/tool_info.h"
+#include "pipeline/output/output_layout.h"
+#include "pipeline/output/tool_info.h"
 
 #include <spdlog/spdlog.h>
 #include <unistd.h>
@@ -37,7 +37,6 @@ namespace fs = std::filesystem;
 
 namespace {
 
-constexpr const char* kManifest = "manifest.json";
 
 fs::path normalised(const fs::path& p) {
   std::error_code ec;
@@ -61,7 +60,7 @@ bool is_leftover(const fs::directory_entry& e) {
 /// The manifest a previous run left in `dir`, else an empty object (a file that is not an
 /// organsmith manifest is reported: every file of the directory is then the user's).
 nlohmann::json manifest_left_in(const fs::path& dir) {
-  const fs::path file = dir / kManifest;
+  const fs::path file = OutputLayout{dir}.manifest();
   std::error_code ec;
   if (!fs::is_regular_file(file, ec)) return nlohmann::json::object();
   if (auto m = read_manifest(dir)) return std::move(*m);
@@ -172,7 +171,7 @@ const nlohmann::json* OutputDir::stage_record(const std::string& stage) const {
 }
 
 bool OutputDir::owned(const std::string& rel) const {
-  if (rel == kManifest) return true;
+  if (rel == OutputLayout{}.manifest().string()) return true;
   auto listed = [&](const nlohmann::json& r) {
     if (!r.is_object() || !r.contains("outputs") || !r["outputs"].is_array()) return false;
     for (const auto& o : r["outputs"])
@@ -286,7 +285,7 @@ void OutputDir::write_manifest(const nlohmann::json& header) {
   header_ = header;
   std::error_code ec;
   fs::create_directories(dir_, ec);
-  write_file_atomic(dir_ / kManifest, manifest_json(header).dump(2) + "\n");
+  write_file_atomic(OutputLayout{dir_}.manifest(), manifest_json(header).dump(2) + "\n");
 }
 
 void OutputDir::remove_if_unused() const {

@@ -3,7 +3,7 @@
 // or delete under `--out`. Its manifest.json lists, per stage, every file organsmith wrote there;
 // only those files are ever replaced or removed. A file organsmith did not write is never touched.
 
-#include "pipeline/read_manifest.h"
+#include "pipeline/output/read_manifest.h"
 
 #include <nlohmann/json.hpp>
 

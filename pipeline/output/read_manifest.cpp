@@ -1,7 +1,7 @@
-#include "pipeline/read_manifest.h"
+#include "pipeline/output/read_manifest.h"
 
 #include "core/file_io.h"
-#include "pipeline/output_layout.h"
+#include "pipeline/output/output_layout.h"
 
 namespace organsmith {
 

@@ -1,4 +1,4 @@
-#include "pipeline/tool_info.h"
+#include "pipeline/output/tool_info.h"
 
 #include "organsmith_version.h"  // generated at build time: version and git commit
 

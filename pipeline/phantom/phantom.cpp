@@ -2,7 +2,7 @@
 // model of the anatomy (body, spine, lungs, airway tree, liver, gallbladder and their tissues),
 // whose parts share one set of dimensions and one tissue lookup per voxel.
 
-#include "pipeline/phantom.h"
+#include "pipeline/phantom/phantom.h"
 
 #include "core/errors.h"
 

@@ -1,9 +1,9 @@
-#include "pipeline/phantom_files.h"
+#include "pipeline/phantom/phantom_files.h"
 #include "core/file_io.h"
 
 #include "core/errors.h"
-#include "pipeline/dicom.h"
-#include "pipeline/image_io.h"
+#include "pipeline/io/dicom.h"
+#include "pipeline/io/image_io.h"
 
 #include <nlohmann/json.hpp>
 

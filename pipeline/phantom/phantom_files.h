@@ -2,7 +2,7 @@
 // The phantom on disk: <dir>/dicom/IM0001.dcm…, <dir>/ground_truth.nii.gz, <dir>/seeds.json.
 
 #include "core/progress.h"
-#include "pipeline/phantom.h"
+#include "pipeline/phantom/phantom.h"
 
 #include <filesystem>
 

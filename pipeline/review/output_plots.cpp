@@ -1,7 +1,7 @@
 // Plots drawn from an output directory: the calibrated laws of the organ regions with their
 // Monte Carlo band and CDFs, and the results of `organsmith calibrate` and `uncertainty`.
 
-#include "pipeline/output_plots.h"
+#include "pipeline/review/output_plots.h"
 
 #include "core/csv.h"
 #include "core/errors.h"
@@ -9,8 +9,8 @@
 #include "core/format.h"
 #include "physics/materials/presets.h"
 #include "physics/materials/uncertainty.h"
-#include "pipeline/output_layout.h"
-#include "pipeline/output_scene.h"
+#include "pipeline/output/output_layout.h"
+#include "pipeline/review/output_scene.h"
 
 #include <spdlog/spdlog.h>
 

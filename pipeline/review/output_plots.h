@@ -1,7 +1,7 @@
 #pragma once
 // Plots made from what a run (or `calibrate`, `uncertainty`) left in a directory, for snapshots.
 
-#include "pipeline/organ_registry.h"
+#include "pipeline/case/organ_registry.h"
 #include "viewer/scene.h"
 
 #include <nlohmann/json.hpp>

@@ -1,14 +1,15 @@
-#include "pipeline/output_scene.h"
+#include "pipeline/review/output_scene.h"
 
 #include "core/errors.h"
 #include "physics/haptics/paths.h"
 #include "physics/materials/presets.h"
 #include "physics/materials/uncertainty.h"
-#include "pipeline/image_io.h"
-#include "pipeline/ingest.h"
-#include "pipeline/organ_registry.h"
-#include "pipeline/output_layout.h"
-#include "pipeline/output_plots.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/ingest.h"
+#include "pipeline/case/organ_registry.h"
+#include "pipeline/output/output_layout.h"
+#include "pipeline/output/read_manifest.h"
+#include "pipeline/review/output_plots.h"
 #include "viewer/label_surface.h"
 #include "viewer/mesh_files.h"
 #include "viewer/snapshot.h"
@@ -113,7 +114,7 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
     throw InputError(ExitCode::input_not_found, "no such output directory", out,
                      "give the directory `organsmith run --out` wrote (default: out)");
   SnapshotScene& scene = os.scene;
-  const nlohmann::json manifest = read_json_or_null(OutputLayout{out}.manifest());
+  const nlohmann::json manifest = read_manifest(out).value_or(nlohmann::json());
   scene.case_name = flags.case_name.empty() ? out.filename().string() : flags.case_name;
   if (flags.case_name.empty() && manifest.is_object() && manifest.contains("case") && manifest["case"].is_object())
     scene.case_name = manifest["case"].value("name", scene.case_name);

@@ -8,7 +8,7 @@
 #include "core/volume.h"
 #include "meshing/mesh.h"
 #include "physics/materials/models.h"
-#include "pipeline/organ_registry.h"
+#include "pipeline/case/organ_registry.h"
 #include "viewer/scene.h"
 
 #include <filesystem>

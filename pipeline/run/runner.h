@@ -4,7 +4,7 @@
 // everything in <out>/manifest.json.
 
 #include "core/progress.h"
-#include "pipeline/case_file.h"
+#include "pipeline/case/case_file.h"
 
 #include <nlohmann/json.hpp>
 

@@ -1,4 +1,4 @@
-#include "pipeline/terminal_progress.h"
+#include "pipeline/run/terminal_progress.h"
 
 #include <signal.h>
 #include <unistd.h>

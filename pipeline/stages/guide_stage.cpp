@@ -1,11 +1,11 @@
-#include "pipeline/guide_stage.h"
+#include "pipeline/stages/guide_stage.h"
 #include "core/file_io.h"
 
 #include "core/errors.h"
 #include "meshing/export.h"
 #include "physics/haptics/contact.h"
-#include "pipeline/image_io.h"
-#include "pipeline/output_layout.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/output/output_layout.h"
 #include "viewer/mesh_files.h"
 
 #include <spdlog/spdlog.h>

@@ -3,7 +3,7 @@
 // `organsmith guide` (inputs read from an output directory).
 
 #include "physics/haptics/paths.h"
-#include "pipeline/organ_registry.h"
+#include "pipeline/case/organ_registry.h"
 
 #include "core/geometry.h"
 #include "core/volume.h"

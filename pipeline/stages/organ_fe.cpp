@@ -1,12 +1,12 @@
-#include "pipeline/organ_fe.h"
+#include "pipeline/stages/organ_fe.h"
 
 #include "core/errors.h"
 #include "core/format.h"
 #include "physics/tissue/realtime_tissue.h"
-#include "pipeline/organ_registry.h"
-#include "pipeline/output_layout.h"
-#include "pipeline/simulate.h"
-#include "pipeline/simulation_picture.h"
+#include "pipeline/case/organ_registry.h"
+#include "pipeline/output/output_layout.h"
+#include "pipeline/stages/simulate.h"
+#include "pipeline/stages/simulation_picture.h"
 #include "viewer/display.h"
 
 #include <spdlog/spdlog.h>

@@ -2,7 +2,7 @@
 // belong together (each reads what the one before wrote); each part is short.
 // simulate: CalculiX runs of the exported load cases (see simulate.h).
 
-#include "pipeline/simulate.h"
+#include "pipeline/stages/simulate.h"
 
 #include "core/file_io.h"
 #include "core/format.h"

@@ -2,7 +2,7 @@
 // the printed RF totals (.dat), and from them the indentation curve and the pressure at which a
 // region reaches the top of its calibrated range (see simulate.h).
 
-#include "pipeline/simulate.h"
+#include "pipeline/stages/simulate.h"
 
 #include <Eigen/Dense>
 #include <Eigen/Eigenvalues>

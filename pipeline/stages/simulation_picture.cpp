@@ -1,6 +1,6 @@
 // The simulate stage's picture (see simulation_picture.h).
 
-#include "pipeline/simulation_picture.h"
+#include "pipeline/stages/simulation_picture.h"
 
 #include "core/format.h"
 #include "viewer/snapshot.h"

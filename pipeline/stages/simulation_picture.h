@@ -2,7 +2,7 @@
 // The picture of a solver's answer: the organ deformed under its load case, coloured by von
 // Mises stress, over its undeformed outline (simulation/<organ>.png, written by the simulate stage).
 
-#include "pipeline/simulate.h"
+#include "pipeline/stages/simulate.h"
 
 #include <Eigen/Core>
 

@@ -11,9 +11,9 @@
 #include "meshing/quality.h"
 #include "meshing/detail.h"
 #include "meshing/tet_improve.h"
-#include "pipeline/image_io.h"
-#include "pipeline/organ_registry.h"
-#include "pipeline/phantom.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/case/organ_registry.h"
+#include "pipeline/phantom/phantom.h"
 #include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>

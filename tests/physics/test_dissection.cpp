@@ -7,7 +7,7 @@
 #include "physics/haptics/contact.h"
 #include "physics/haptics/dissection.h"
 #include "physics/haptics/paths.h"
-#include "pipeline/image_io.h"
+#include "pipeline/io/image_io.h"
 #include "tests/physics/synthetic_meshes.h"
 #include "tests/support/test_support.h"
 

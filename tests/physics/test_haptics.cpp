@@ -8,7 +8,7 @@
 #include "physics/haptics/haptic_loop.h"
 #include "physics/haptics/paths.h"
 #include "physics/materials/presets.h"
-#include "pipeline/phantom.h"
+#include "pipeline/phantom/phantom.h"
 #include "tests/physics/synthetic_meshes.h"
 
 #include <Eigen/Geometry>

@@ -4,7 +4,7 @@
 
 #include "core/progress.h"
 #include "core/volume.h"
-#include "pipeline/dicom.h"
+#include "pipeline/io/dicom.h"
 #include "tests/support/test_support.h"
 
 #include <gdcmDataElement.h>

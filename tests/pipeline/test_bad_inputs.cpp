@@ -4,7 +4,7 @@
 #include "core/errors.h"
 #include "core/process.h"
 #include "core/sha256.h"
-#include "pipeline/image_io.h"
+#include "pipeline/io/image_io.h"
 #include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>

@@ -1,5 +1,5 @@
 #include "core/errors.h"
-#include "pipeline/case_file.h"
+#include "pipeline/case/case_file.h"
 #include "segmentation/presets.h"
 
 #include <gtest/gtest.h>

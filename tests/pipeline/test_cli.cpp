@@ -3,8 +3,8 @@
 
 #include "core/errors.h"
 #include "core/sha256.h"
-#include "pipeline/dicom.h"
-#include "pipeline/image_io.h"
+#include "pipeline/io/dicom.h"
+#include "pipeline/io/image_io.h"
 #include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>

@@ -3,9 +3,9 @@
 
 #include "core/progress.h"
 #include "core/sha256.h"
-#include "pipeline/dicom.h"
-#include "pipeline/image_io.h"
-#include "pipeline/ingest.h"
+#include "pipeline/io/dicom.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/ingest.h"
 #include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>

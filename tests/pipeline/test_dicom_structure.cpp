@@ -1,11 +1,11 @@
-// The DICOM byte-structure check (pipeline/dicom_structure.h): synthetic files in each transfer
+// The DICOM byte-structure check (pipeline/io/dicom_structure.h): synthetic files in each transfer
 // syntax with sequences and items of undefined length, encapsulated pixel data and every prefix
 // of them; real slices cut anywhere; real series re-encoded by DCMTK's dcmconv (explicit VR big
 // endian, deflated, implicit VR) read to the same voxels.
 
 #include "core/progress.h"
-#include "pipeline/dicom_structure.h"
-#include "pipeline/ingest.h"
+#include "pipeline/io/dicom_structure.h"
+#include "pipeline/io/ingest.h"
 #include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>

@@ -2,9 +2,9 @@
 // kind of bad input with its own error code.
 
 #include "core/errors.h"
-#include "pipeline/dicom.h"
-#include "pipeline/image_io.h"
-#include "pipeline/ingest.h"
+#include "pipeline/io/dicom.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/ingest.h"
 #include "tests/support/test_support.h"
 
 #include <gdcmImageWriter.h>

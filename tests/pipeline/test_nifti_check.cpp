@@ -2,7 +2,7 @@
 // garbage): each kind with its exit code, a message naming the file, and no crash.
 
 #include "core/errors.h"
-#include "pipeline/image_io.h"
+#include "pipeline/io/image_io.h"
 #include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>

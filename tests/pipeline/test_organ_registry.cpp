@@ -2,8 +2,8 @@
 // with its own registry file, and mistakes in a registry are errors naming the organ and key.
 
 #include "core/errors.h"
-#include "pipeline/case_file.h"
-#include "pipeline/organ_registry.h"
+#include "pipeline/case/case_file.h"
+#include "pipeline/case/organ_registry.h"
 #include "tests/support/test_support.h"
 #include "viewer/image.h"
 

@@ -4,7 +4,7 @@
 
 #include "core/errors.h"
 #include "core/sha256.h"
-#include "pipeline/output_dir.h"
+#include "pipeline/output/output_dir.h"
 #include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>

@@ -2,7 +2,7 @@
 // Properties of the synthetic phantom: determinism, tissue HU, organ sizes and placement, noise
 // level, seeds and option handling. A coarse grid (2.5 mm pixels, 5 mm slices) keeps it fast.
 
-#include "pipeline/phantom.h"
+#include "pipeline/phantom/phantom.h"
 
 #include "core/errors.h"
 

@@ -11,8 +11,8 @@
 
 #include "meshing/export.h"
 #include "physics/materials/solver_fit.h"
-#include "pipeline/image_io.h"
-#include "pipeline/simulate.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/stages/simulate.h"
 #include "viewer/image.h"
 
 #include "tests/support/test_support.h"

@@ -5,7 +5,7 @@
 
 #include "meshing/export.h"
 #include "physics/materials/solver_fit.h"
-#include "pipeline/organ_registry.h"
+#include "pipeline/case/organ_registry.h"
 
 #include "tests/support/test_support.h"
 

@@ -1,8 +1,8 @@
-// NRRD and MetaImage headers checked before ITK reads them (pipeline/text_header_check.h): well
+// NRRD and MetaImage headers checked before ITK reads them (pipeline/io/text_header_check.h): well
 // formed files (written by hand and by ITK) read; each corrupt field is refused with its code.
 
 #include "core/errors.h"
-#include "pipeline/image_io.h"
+#include "pipeline/io/image_io.h"
 #include "tests/support/test_support.h"
 
 #include <gtest/gtest.h>

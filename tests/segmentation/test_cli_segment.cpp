@@ -2,7 +2,7 @@
 
 #include "tests/support/test_support.h"
 #include "core/errors.h"
-#include "pipeline/image_io.h"
+#include "pipeline/io/image_io.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>

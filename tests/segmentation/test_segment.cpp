@@ -2,9 +2,9 @@
 // ground truth / references, robustness to the seed position, bad input, determinism.
 
 #include "tests/support/test_support.h"
-#include "pipeline/image_io.h"
-#include "pipeline/ingest.h"
-#include "pipeline/phantom.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/ingest.h"
+#include "pipeline/phantom/phantom.h"
 #include "scan_variants.h"
 #include "segmentation/segment.h"
 

@@ -9,10 +9,10 @@
 // in kShortOfTarget with what they reach.
 
 #include "tests/support/test_support.h"
-#include "pipeline/image_io.h"
-#include "pipeline/ingest.h"
-#include "pipeline/organ_registry.h"
-#include "pipeline/phantom.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/ingest.h"
+#include "pipeline/case/organ_registry.h"
+#include "pipeline/phantom/phantom.h"
 #include "scan_variants.h"
 #include "meshing/mesh.h"
 #include "physics/haptics/contact.h"

@@ -1,9 +1,9 @@
 #include "viewer_fixture.h"
 
-#include "pipeline/organ_registry.h"
+#include "pipeline/case/organ_registry.h"
 
-#include "pipeline/image_io.h"
-#include "pipeline/ingest.h"
+#include "pipeline/io/image_io.h"
+#include "pipeline/io/ingest.h"
 #include "tests/support/test_support.h"
 #include "viewer/label_surface.h"
 
