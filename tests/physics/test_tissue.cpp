@@ -319,5 +319,17 @@ TEST(RealtimeTissue, APressFeelsTheStaticForceAndTheBlockComesBackToRest) {
     EXPECT_EQ(rt.tool_force_N(tool).norm(), 0.0) << kind << ": out of contact";
     for (int k = 0; k < int(o.update_hz); ++k) rt.update_once();
     EXPECT_LT(rt.displacement_mm().cwiseAbs().maxCoeff(), 0.01 * depth) << kind;
+    // Pressed again and pulled straight out: the tool lets go, and the block is at rest in that one
+    // update (it carries no load but the tool's), wherever the equilibrium was.
+    for (double s = 0; s < travel + 1e-9; s += speed * dt) {
+      rt.set_tool(start + down * s);
+      rt.update_once();
+    }
+    ASSERT_GT(rt.displacement_mm().cwiseAbs().maxCoeff(), 0.1 * depth) << kind;
+    const Eigen::Vector3d out = start - down * 1.0;
+    rt.set_tool(out);
+    rt.update_once();
+    EXPECT_EQ(rt.displacement_mm().cwiseAbs().maxCoeff(), 0.0) << kind;
+    EXPECT_EQ(rt.tool_force_N(out).norm(), 0.0) << kind;
   }
 }
