@@ -501,6 +501,16 @@ OrganMesh mesh_one(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOpti
     c.optimiser_seconds = 0.0;
     c.max_vertices = vertex_budget(p.label_volume_mm3, c.cell_size_mm);
     if (spec.model == OrganModel::tube) {
+      // The cut ends' rims (inner and outer circle of each cap, a wall's thickness apart) are
+      // protected with balls spaced at half the wall's thickness: balls of the tetrahedra's edge
+      // on two rims closer than that must shrink to part, and the tiny, graded elements they
+      // leave were every failing tetrahedron of the first mesh (phantom trachea, 4.5 mm
+      // tetrahedra: 292 of 10 133 past the 10°/2 gate, all within 3 mm of a cap, shortest edge
+      // 0.67 mm median). Spaced at t/2 the first mesh passes on the phantom and the real 8 mm
+      // chest at tetrahedral edges 3, 4.5, 6 mm and the surface edge, surface edges 1.2–2 mm
+      // (10 of 12; the two others within 2.07 of the ratio's 2), with a mesh stage 3–7 times
+      // faster (no remedy to run): meshing/README.md "Tetrahedra".
+      c.edge_size_mm = std::min(tet_edge_mm, 0.5 * t);
       out.volume = mesh3_tets_polyhedral(tube_wall, kRegionTracheaWall, 60.0, c);
       out.region_names[kRegionTracheaWall] = spec.name + "_wall";
     } else if (spec.model == OrganModel::wall_body) {
