@@ -12,6 +12,7 @@
 #include "pipeline/io/image_io.h"
 #include "pipeline/io/ingest.h"
 #include "pipeline/case/organ_registry.h"
+#include "pipeline/case/stage_options.h"
 #include "pipeline/phantom/phantom.h"
 #include "scan_variants.h"
 #include "meshing/mesh.h"
@@ -480,10 +481,26 @@ struct MeshRow {
   std::string failures;  ///< empty = every gate passed and every path is valid
   std::string remedies;
   std::string paths;     ///< the paths' figures
+  std::string gates;     ///< each gate's figure for this variant
   double seconds = 0;
 };
 
-MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string& organ, bool seeded) {
+/// Each gate's worst figure over a sweep's variants (the margin each gate passes with).
+struct GateExtremes {
+  double angle_min_deg = 180, edge_fraction_min = 1, volume_error_max = 0, fold_max_deg = 0;
+  double dihedral_min_deg = 180, radius_edge_max = 0;
+  void print(const char* sweep) const {
+    std::printf("%s, worst over the variants (gate): smallest triangle angle %.1f° (25°), edges within ±25 %% %.1f %% "
+                "(90 %%), |volume error| %.2f %% (3 %%), largest fold of a surface %.1f° (60° where asked), smallest "
+                "dihedral %.2f° (10°), largest radius-edge %.3f (2)\n",
+                sweep, angle_min_deg, 100 * edge_fraction_min, 100 * volume_error_max, fold_max_deg, dihedral_min_deg,
+                radius_edge_max);
+  }
+};
+
+/// `tet_edge_mm`: the tetrahedra's edge (`run`'s default, MeshStageOptions; 0 = the surface edge).
+MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string& organ, bool seeded, double tet_edge_mm,
+                     GateExtremes& worst) {
   const Scan s = as_ingested(raw);
   NullProgress np;
   OrganRequest req{organ, {}, {}};
@@ -492,6 +509,7 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
   MeshOptions mo;
   mo.organs = {mesh_spec(builtin_organ_registry().at(organ))};
   mo.enforce_quality = false;
+  mo.tet_edge_mm = tet_edge_mm;
   MeshRow row;
   const auto t0 = std::chrono::steady_clock::now();
   try {
@@ -502,6 +520,23 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
       for (const auto& f : o.volume_quality.failures) row.failures += o.spec.name + " tetrahedra: " + f + "; ";
       for (const auto& w : o.warnings)
         if (w.find("remed") != std::string::npos) row.remedies += w + "; ";
+      char g[200];
+      for (const auto& surf : o.surfaces) {
+        const SurfaceQuality& q = surf.quality;
+        std::snprintf(g, sizeof g, "%s %.1f° %.1f%% fold %.0f°; ", surf.name.c_str(), q.angle_min_deg,
+                      100 * q.edge_within_tolerance, q.fold_max_deg);
+        row.gates += g;
+        worst.angle_min_deg = std::min(worst.angle_min_deg, q.angle_min_deg);
+        worst.edge_fraction_min = std::min(worst.edge_fraction_min, q.edge_within_tolerance);
+        if (q.reference_volume_mm3 > 0) worst.volume_error_max = std::max(worst.volume_error_max, std::abs(q.volume_error));
+        worst.fold_max_deg = std::max(worst.fold_max_deg, q.fold_max_deg);
+      }
+      if (o.volume_quality.tets > 0) {
+        std::snprintf(g, sizeof g, "tets %.2f° %.3f", o.volume_quality.dihedral_min_deg, o.volume_quality.radius_edge_max);
+        row.gates += g;
+        worst.dihedral_min_deg = std::min(worst.dihedral_min_deg, o.volume_quality.dihedral_min_deg);
+        worst.radius_edge_max = std::max(worst.radius_edge_max, o.volume_quality.radius_edge_max);
+      }
     }
     // The organ's guidance paths, as the guide stage makes them (no liver label: the bed from the CT).
     for (const auto& o : m.organs) {
@@ -537,9 +572,9 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
     row.failures = std::string("error: ") + e.what();
   }
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf("| %-12s | %-22s | %s | %5.1f s | %s | %s\n", organ.c_str(), name.c_str(),
+  std::printf("| %-12s | %-22s | tets %.1f mm | %s | %5.1f s | %s | %s | %s\n", organ.c_str(), name.c_str(), tet_edge_mm,
               row.failures.empty() ? "all gates pass, paths valid" : row.failures.c_str(), row.seconds,
-              row.paths.c_str(), row.remedies.c_str());
+              row.gates.c_str(), row.paths.c_str(), row.remedies.empty() ? "first mesh" : row.remedies.c_str());
   std::fflush(stdout);
   return row;
 }
@@ -548,6 +583,7 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
 
 TEST(MeshSweep, RealTracheaVariantsPassEveryGate) {
   ORGANSMITH_REQUIRE_REAL_DATA();
+  GateExtremes worst;
   const Scan base = real_scan("chest-dicom-8mm/dicom", "chest-dicom-8mm/trachea-reference.nii.gz");
   std::vector<std::pair<std::string, Scan>> v{{"unchanged", base},
                                               {"1.0 mm slices", resample_slices(base, 1.0)},
@@ -555,15 +591,19 @@ TEST(MeshSweep, RealTracheaVariantsPassEveryGate) {
                                               {"5.0 mm slices", resample_slices(base, 5.0)},
                                               {"cut at high-k edge", crop_through_organ(base, 0.6, true)},
                                               {"oblique 10 deg", tilted(base, 10.0)}};
-  for (const auto& [name, s] : v) {
-    const MeshRow r = mesh_variant(name, s, "trachea", false);
-    EXPECT_TRUE(r.failures.empty()) << name << ": " << r.failures;
-  }
+  // At `run`'s tetrahedral edge and at the surface's (finer tetrahedra, harder to keep in the gate).
+  for (const double tet_edge_mm : {MeshStageOptions{}.tet_edge_mm, 0.0})
+    for (const auto& [name, s] : v) {
+      const MeshRow r = mesh_variant(name, s, "trachea", false, tet_edge_mm, worst);
+      EXPECT_TRUE(r.failures.empty()) << name << ", tetrahedra " << tet_edge_mm << " mm: " << r.failures;
+    }
+  worst.print("real trachea mesh sweep");
 }
 
 TEST(MeshSweep, RealGallbladderVariantsPassEveryGate) {
   ORGANSMITH_REQUIRE_REAL_DATA();
   Scan base = real_scan("abdomen-ct-3mm/ct.nii.gz", "abdomen-ct-3mm/gallbladder-reference.nii.gz");
+  GateExtremes worst;
   base.seed_lps_mm = seed_at_centre(base.ref);
   std::vector<std::pair<std::string, Scan>> v{{"unchanged", base},
                                               {"1.0 mm slices", resample_slices(base, 1.0)},
@@ -571,10 +611,13 @@ TEST(MeshSweep, RealGallbladderVariantsPassEveryGate) {
                                               {"cut at high-k edge", crop_through_organ(base, 0.6, true)},
                                               {"cut at low-k edge", crop_through_organ(base, 0.4, false)},
                                               {"oblique 10 deg", tilted(base, 10.0)}};
-  for (const auto& [name, s] : v) {
-    const MeshRow r = mesh_variant(name, s, "gallbladder", true);
-    EXPECT_TRUE(r.failures.empty()) << name << ": " << r.failures;
-  }
+  // At `run`'s tetrahedral edge and at the surface's (finer tetrahedra, harder to keep in the gate).
+  for (const double tet_edge_mm : {MeshStageOptions{}.tet_edge_mm, 0.0})
+    for (const auto& [name, s] : v) {
+      const MeshRow r = mesh_variant(name, s, "gallbladder", true, tet_edge_mm, worst);
+      EXPECT_TRUE(r.failures.empty()) << name << ", tetrahedra " << tet_edge_mm << " mm: " << r.failures;
+    }
+  worst.print("real gallbladder mesh sweep");
 }
 
 // The trachea's resampled variants are all interpolated from 8 mm slices. The reference was drawn
