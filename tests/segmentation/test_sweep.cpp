@@ -519,7 +519,7 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
         for (const auto& f : surf.quality.failures) row.failures += surf.name + ": " + f + "; ";
       for (const auto& f : o.volume_quality.failures) row.failures += o.spec.name + " tetrahedra: " + f + "; ";
       for (const auto& w : o.warnings)
-        if (w.find("remed") != std::string::npos) row.remedies += w + "; ";
+        if (w.find("remed") != std::string::npos || w.find("gates failed") != std::string::npos) row.remedies += w + "; ";
       char g[200];
       for (const auto& surf : o.surfaces) {
         const SurfaceQuality& q = surf.quality;
