@@ -180,16 +180,22 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
   const Eigen::Vector3d p0 = fe.probe->point_lps_mm - dir * (ro.tool_radius_mm + 1.0);
   // The sphere's front reaches the probe point after 1 mm; the grip then goes `depth_mm` in.
   const double travel = 1.0 + depth_mm;
+  // The hold lasts at least t_hold and until the equilibrium is where the tool is (at most
+  // kMaxHoldS): its force is then the settled answer, compared with the same grip pressed
+  // statically, whatever else the machine is doing (a busy machine made equilibria late).
+  constexpr double kMaxHoldS = 10.0;
   const double t_in = travel / speed, t_hold = 0.5, t_rest = 1.0;
-  const double total = 2 * t_in + t_hold + t_rest;
+  std::atomic<double> hold_end{-1.0};  // set by the force loop when the hold ends
   auto tool_at = [&](double t) {
-    double s = t < t_in ? speed * t : t < t_in + t_hold ? travel : std::max(0.0, travel - speed * (t - t_in - t_hold));
+    const double he = hold_end.load();
+    double s = t < t_in ? speed * t : he < 0 ? travel : std::max(0.0, travel - speed * (t - he));
     return Eigen::Vector3d(p0 + dir * s);
   };
+  std::atomic<double> total{2 * t_in + kMaxHoldS + t_rest};  // until the hold's end is known
   rt.set_tool(tool_at(0));
   rt.start();
   std::vector<double> tick_us, jitter_us;
-  tick_us.reserve(std::size_t(total * 1000) + 100);
+  tick_us.reserve(std::size_t((2 * t_in + t_hold + t_rest) * 1000) + 100);
   jitter_us.reserve(tick_us.capacity());
   double fmax = 0.0, hold_force = 0.0, hold_fe_force = 0.0, hold_lag = 0.0;
   Eigen::Vector3d hold_held = Eigen::Vector3d::Zero();
@@ -215,7 +221,7 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
     const auto wake = clock::now();
     jitter_us.push_back(std::chrono::duration<double, std::micro>(wake - next).count());
     const double t = std::chrono::duration<double>(wake - start).count();
-    if (t > total) {
+    if (t > total.load()) {
       end_s = t;
       break;
     }
@@ -233,7 +239,15 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
         last_equilibrium = c.update;
       }
     }
-    if (t <= t_in + t_hold) {  // the last one: the end of the hold
+    if (t > t_in && hold_end.load() < 0) {
+      const physics::ToolContact c = rt.contact();
+      const bool settled = c.in_contact && (x - Eigen::Vector3d(c.tool_mm.data())).norm() < 1e-4;
+      if (t - t_in >= kMaxHoldS || (t - t_in >= t_hold && settled)) {
+        hold_end.store(t);
+        total.store(t + t_in + t_rest);
+      }
+    }
+    if (hold_end.load() < 0 || t <= hold_end.load()) {  // the last one: the end of the hold
       hold_force = F.norm();
       const physics::ToolContact c = rt.contact();
       hold_fe_force = Eigen::Vector3d(c.force_on_tool_N.data()).norm();
@@ -251,9 +265,10 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
   while (!done.load()) {  // progress from this thread; the grip near the end of the hold
     std::this_thread::sleep_for(std::chrono::milliseconds(100));
     const double t = std::chrono::duration<double>(clock::now() - start).count();
-    if (t < t_in + t_hold) gap_max = std::max(gap_max, rt.last_gap_mm());
-    if (t > t_in + 0.5 * t_hold && t < t_in + t_hold) hold_grip = rt.grip_nodes();
-    progress.report(std::min(1.0, t / total), "real-time press");
+    const double he = hold_end.load();
+    if (he < 0) gap_max = std::max(gap_max, rt.last_gap_mm());
+    if (t > t_in + 0.5 * t_hold && he < 0) hold_grip = rt.grip_nodes();
+    progress.report(std::min(1.0, t / total.load()), "real-time press");
   }
   force_loop.join();
   rt.stop();
@@ -290,7 +305,7 @@ nlohmann::json realtime_press(physics::TissueModel& model, const OrganFe& fe, do
           {"force_tick_us_p99", percentile(tick_us, 0.99)},
           {"force_jitter_us_p99", percentile(jitter_us, 0.99)},
           {"force_loop_realtime_priority", realtime},
-          {"press", {{"speed_mm_per_s", speed}, {"depth_mm", depth_mm}, {"hold_s", t_hold}, {"rest_after_s", t_rest},
+          {"press", {{"speed_mm_per_s", speed}, {"depth_mm", depth_mm}, {"hold_s", hold_end.load() - t_in}, {"rest_after_s", t_rest},
                      {"peak_force_N", fmax}, {"force_at_end_of_hold_N", hold_force}, {"tissue_force_at_end_of_hold_N", hold_fe_force},
                      {"tissue_behind_tool_at_end_of_hold_mm", hold_lag}, {"held_nodes_at_end_of_hold", hold_grip.size()},
                      {"static_force_same_grip_N", static_force}, {"largest_displacement_after_rest_mm", umax},
