@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Real-time tissue model (issue 38) against mesh size, element order and tool speed, on the
 # phantom's gallbladder: each row is `haptics --indent` (the simulate stage's probe pressed through
-# the model's threads at the given speed to CalculiX's deepest depth, held, withdrawn, 1 s at rest).
+# the model's threads at the given speed to CalculiX's deepest depth, held until the equilibrium
+# is where the tool is (at least 0.5 s), withdrawn, 1 s at rest).
 # CalculiX runs the default mesh's load case once; every row's felt force (what the 1 kHz loop gave
 # the tool) is compared with CalculiX's curve on that same mesh (the coarser meshes against the
 # default's curve: the coarsening's effect). Prints nodes, equilibria per second and their p50/p99
