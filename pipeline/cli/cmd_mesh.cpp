@@ -7,7 +7,7 @@
 #include "physics/materials/presets.h"
 #include "pipeline/output/output_layout.h"
 #include "pipeline/cli/commands.h"
-#include "pipeline/stages/guide_stage.h"
+#include "pipeline/stages/mesh_stage.h"
 #include "pipeline/case/organ_registry.h"
 #include "pipeline/output/output_dir.h"
 #include "pipeline/case/case_file.h"
@@ -131,57 +131,37 @@ int run_mesh(const MeshFlags& f) {
   if (f.out.empty()) throw UsageError("--out is required with a label map file", "e.g. --out meshes");
   OutputDir out(f.out, OutputDirOptions{.inputs = {f.input}, .command = "mesh"});
   const LabelMap labels = read_label_map(f.input);
-  MeshOptions options;
-  options.edge_mm = f.edge_mm > 0 ? f.edge_mm : 1.5;
-  options.tet_edge_mm = f.tet_edge_mm >= 0 ? f.tet_edge_mm : MeshStageOptions{}.tet_edge_mm;
-  options.organs = organ_specs(f);
+  MeshStageOptions options;  // the run's defaults, with the flags given
+  if (f.edge_mm > 0) options.edge_mm = f.edge_mm;
+  if (f.tet_edge_mm >= 0) options.tet_edge_mm = f.tet_edge_mm;
+  if (!f.formats.empty()) options.formats = split(f.formats, ',');
+  options.ras = f.ras;
   options.tetrahedra = !f.no_tets;
-  options.enforce_quality = !f.allow_failures;
+  options.quality_gate = f.allow_failures ? "report" : "enforce";
+  options.material_band = f.material_band;
   if (f.max_fold_deg >= 0) options.max_fold_deg = f.max_fold_deg;
-  ExportOptions eo;
-  if (!f.formats.empty()) eo.formats = split(f.formats, ',');
-  eo.ras = f.ras;
-  eo.materials = region_materials(builtin_organ_registry());
-  if (f.material_band) {
-    std::vector<std::string> names;
-    for (const auto& spec : options.organs)
-      if (builtin_organ_registry().find(spec.name)) names.push_back(spec.name);
-    eo.material_band = region_band_materials(builtin_organ_registry(), names);
-  }
   {  // reject unknown formats before spending time on meshing
     const auto known = all_mesh_formats();
-    for (const auto& x : eo.formats)
+    for (const auto& x : options.formats)
       if (std::find(known.begin(), known.end(), x) == known.end())
         throw UsageError("unknown mesh format '" + x + "'", "choose from stl, obj, ply, vtp, vtu, msh, msh22, inp, feb");
   }
-
-  TerminalProgress progress;
-  OrganMeshes meshes;
-  try {
-    meshes = mesh_organs(labels, options, progress);
-  } catch (const Error& e) {  // meshing knows the labels, not their file: name it
-    if (!e.path().empty()) throw;
-    throw Error(e.code(), e.message(), f.input, e.hint());
-  }
-  progress.finish();
-  for (const auto& w : meshes.warnings) spdlog::warn("{}", w);
-
   // The gallbladder's liver bed (its fixed set) from the label map's liver label where it has
   // one, else the liver's usual direction (no CT here; `run` also looks in the CT).
-  if (const OrganInfo* gb = builtin_organ_registry().find("gallbladder"))
-    for (const auto& organ : meshes.organs)
-      if (organ.spec.name == gb->name && organ.spec.model == OrganModel::wall_body && !organ.volume.tets.empty()) {
-        GuideInputs in;
-        in.labels = &labels;
-        const LiverBedForSolver bed = liver_bed_for_solver(organ.surfaces.front().mesh, in, {}, builtin_organ_registry());
-        eo.boundaries.liver_bed_score = bed.score;
-        eo.boundaries.liver_bed_source = bed.source;
-      }
+  MeshStageInputs in;
+  in.labels = &labels;
+  in.labels_file = f.input;
+  in.organs = organ_specs(f);
+  in.registry = &builtin_organ_registry();
+  for (const auto& spec : in.organs)
+    if (in.registry->find(spec.name)) in.band_organs.push_back(spec.name);
+
+  TerminalProgress progress;
   const fs::path final_dir = out.path();
-  std::vector<std::string> warnings;
-  out.commit("mesh", [&](const fs::path& staging) { export_meshes(meshes, staging, eo, &warnings); });
+  OrganMeshes meshes;
+  out.commit("mesh", [&](const fs::path& staging) { meshes = mesh_stage(in, options, staging, progress); });
+  progress.finish();
   for (const auto& organ : meshes.organs) {
-    for (const auto& w : organ.warnings) spdlog::warn("{}", w);
     for (const auto& s : organ.surfaces) {
       const auto& q = s.quality;
       std::string line = fmt::format("{:<24} {:>7} triangles, edges within ±25 %: {:.1f} %, min angle {:.1f}°", s.name,
@@ -195,7 +175,6 @@ int run_mesh(const MeshFlags& f) {
                    organ.volume_quality.tets, organ.volume_quality.dihedral_min_deg, organ.volume_quality.radius_edge_max,
                    organ.volume_quality.ok() ? "" : "  FAILS: " + organ.volume_quality.failures.front());
   }
-  for (const auto& w : warnings) spdlog::warn("{}", w);
   spdlog::info("meshes written to {} in {:.2f} s", final_dir.string(),
                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
   return 0;

@@ -12,6 +12,7 @@
 #include "core/memory.h"
 #include "core/sha256.h"
 #include "pipeline/stages/guide_stage.h"
+#include "pipeline/stages/mesh_stage.h"
 #include "pipeline/io/ingest.h"
 #include "pipeline/phantom/phantom.h"
 #include "pipeline/io/image_io.h"
@@ -257,82 +258,25 @@ class Runner {
   /// mesh builds surfaces, organ walls and tetrahedra from the segmentation and exports them
   /// into meshes/<organ>/ with the calibrated materials in the solver files.
   void write_meshes(const fs::path& staging) {
-    const LabelMap& labels = segmentation();
     const MeshStageOptions& mo = case_.stages.mesh;
-    MeshOptions options;
-    for (const auto& o : case_.organs) options.organs.push_back(mesh_spec(case_.registry.at(o.name), mo.wall_mm));
-    options.edge_mm = mo.edge_mm;
-    options.tet_edge_mm = mo.tet_edge_mm;
-    options.tetrahedra = mo.tetrahedra;
-    options.max_fold_deg = mo.max_fold_deg;
-    // "enforce" (the default): a figure still failing after the remedies stops the run (exit 61);
-    // "report": it is a warning and quality.json records it.
-    options.enforce_quality = mo.quality_gate == "enforce";
-    OrganMeshes meshes;
-    try {
-      meshes = mesh_organs(labels, options, progress_);
-    } catch (const Error& e) {  // meshing knows the labels, not their file: name it
-      if (!e.path().empty()) throw;
-      throw Error(e.code(), e.message(), layout_.labels(), e.hint());
+    MeshStageInputs in;
+    in.labels = &segmentation();
+    in.labels_file = layout_.labels();
+    for (const auto& o : case_.organs) {
+      in.organs.push_back(mesh_spec(case_.registry.at(o.name), mo.wall_mm));
+      in.band_organs.push_back(o.name);
     }
-    for (const auto& w : meshes.warnings) spdlog::warn("mesh: {}", w);
-    for (const auto& organ : meshes.organs) {
-      for (const auto& w : organ.warnings) spdlog::warn("mesh: {}", w);  // each names its organ
-      for (const auto& f : organ.volume_quality.failures)
-        spdlog::warn("mesh: {}: tetrahedral quality gate not met: {}", organ.spec.name, f);
-      for (const auto& surf : organ.surfaces)
-        for (const auto& f : surf.quality.failures) spdlog::warn("mesh: {}: {}", surf.name, f);
-    }
-    ExportOptions ex;
-    ex.formats = mo.formats;
-    ex.ras = mo.ras;
-    ex.materials = region_materials(case_.registry);
-    ex.quadratic = !mo.linear_tets;
-    if (mo.material_band) {
-      std::vector<std::string> organs;
-      for (const auto& o : case_.organs) organs.push_back(o.name);
-      ex.material_band = region_band_materials(case_.registry, organs);
-    }
-    for (const auto& spec : options.organs) {
-      SolverScenario sc = default_scenario(spec);
-      if (const auto it = mo.pressure_kPa.find(spec.name); it != mo.pressure_kPa.end()) {
-        // A pressure asked for: the pressure step (for the gallbladder instead of the probe).
-        MeshOrganSpec pressure_spec = spec;
-        pressure_spec.load_case = "pressure";
-        sc = default_scenario(pressure_spec);
-        sc.pressure_kPa = it->second;
-      }
-      if (std::find(mo.indentation.begin(), mo.indentation.end(), spec.name) != mo.indentation.end()) {
-        // The probe asked for (the trachea's anterior wall instead of its airway pressure).
-        MeshOrganSpec probe_spec = spec;
-        probe_spec.load_case = "indentation";
-        sc = default_scenario(probe_spec);
-      }
-      sc.probe_depth_mm = case_.stages.simulate.probe_depth_mm;
-      ex.scenarios[spec.name] = sc;
-    }
-    if (const auto& p = case_.stages.simulate.probe_lps_mm; p.size() == 3) ex.boundaries.probe_lps_mm = Eigen::Vector3d(p[0], p[1], p[2]);
-    // The gallbladder's liver bed (its fixed set) by the guide stage's rule: a liver label, else
-    // the CT, else the liver's usual direction.
-    if (const OrganInfo* gb = case_.registry.find("gallbladder"))
-      for (const auto& organ : meshes.organs)
-        if (organ.spec.name == gb->name && organ.spec.model == OrganModel::wall_body && !organ.volume.tets.empty()) {
-          std::optional<LabelMap> truth;
-          GuideInputs in;
-          in.labels = &labels;
-          if (fs::exists(layout_.phantom_truth())) in.truth = &truth.emplace(read_label_map(layout_.phantom_truth()));
-          in.ct = [this]() -> const Volume* { return &volume(); };
-          const LiverBedForSolver bed = liver_bed_for_solver(organ.surfaces.front().mesh, in, case_.stages.guide, case_.registry);
-          ex.boundaries.liver_bed_score = bed.score;
-          ex.boundaries.liver_bed_source = bed.source;
-          spdlog::info("mesh: {} liver bed (fixed in its load case) from the {}", gb->name, bed.source);
-        }
-    std::vector<std::string> warnings;
-    const OutputLayout staged{staging};
-    fs::create_directories(staged.meshes_dir());
-    export_meshes(meshes, staged.meshes_dir(), ex, &warnings);
-    for (const auto& w : warnings) spdlog::warn("mesh: {}", w);
-    model_.meshes = std::move(meshes);
+    in.registry = &case_.registry;
+    std::optional<LabelMap> truth;
+    in.truth = [&]() -> const LabelMap* {
+      if (!truth && fs::exists(layout_.phantom_truth())) truth.emplace(read_label_map(layout_.phantom_truth()));
+      return truth ? &*truth : nullptr;
+    };
+    in.ct = [this]() -> const Volume* { return &volume(); };
+    in.guide = case_.stages.guide;
+    in.probe_lps_mm = case_.stages.simulate.probe_lps_mm;
+    in.probe_depth_mm = case_.stages.simulate.probe_depth_mm;
+    model_.meshes = mesh_stage(in, mo, OutputLayout{staging}.meshes_dir(), progress_);
   }
 
   /// simulate runs every organ's exported load case (meshes/<organ>/<organ>.inp) in CalculiX and
