@@ -5,18 +5,6 @@
 
 namespace organsmith {
 
-std::string label_name(std::uint8_t value) {
-  switch (static_cast<Label>(value)) {
-    case Label::background: return "background";
-    case Label::gallbladder: return "gallbladder";
-    case Label::trachea: return "trachea";
-    case Label::liver: return "liver";
-    case Label::lungs: return "lungs";
-    case Label::body: return "body";
-  }
-  return "label" + std::to_string(value);
-}
-
 std::int64_t LabelMap::count(std::uint8_t value) const {
   return std::count(labels.begin(), labels.end(), value);
 }

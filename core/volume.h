@@ -23,21 +23,9 @@ struct Volume {
   const float* slice(std::int64_t k) const { return hu.data() + k * grid.slice_voxel_count(); }
 };
 
-/// Label values shared by every stage. 0 is background.
-enum class Label : std::uint8_t {
-  background = 0,
-  gallbladder = 1,
-  trachea = 2,
-  liver = 3,
-  lungs = 4,
-  body = 5,  ///< soft tissue and bone inside the skin that no other label claims
-};
-
-/// Lower-case name of a label ("gallbladder", …); "label<N>" for values without a name.
-std::string label_name(std::uint8_t value);
-
-/// Per-voxel uint8 labels on the grid of a Volume (values: see `Label`). resize() does not
-/// zero new voxels; use assign(n, 0).
+/// Per-voxel uint8 labels on the grid of a Volume; 0 is background. Which organ a value is comes
+/// from the organ registry (data/organs.toml), never from here. resize() does not zero new
+/// voxels; use assign(n, 0).
 struct LabelMap {
   ImageGrid grid;
   VoxelBuffer<std::uint8_t> labels;

@@ -353,7 +353,7 @@ LiverBedScore liver_bed_score(const SurfaceMesh& gb, const LabelMap* liver, cons
   LiverBedScore out;
   std::vector<double> score;
   std::string why_not;  // why the label or the CT could not give the bed
-  if (liver && liver->count(o.liver_label) > 0) {
+  if (liver && o.liver_label != 0 && liver->count(o.liver_label) > 0) {
     score = score_from_label(gb, *liver, o);
     if (std::find(score.begin(), score.end(), 1.0) != score.end()) out.source = "liver label";
     else {

@@ -68,7 +68,9 @@ LiverBedEstimate liver_bed_from_ct(const SurfaceMesh& gallbladder, const Volume&
 std::vector<Eigen::Vector3d> vertex_normals(const SurfaceMesh& mesh);
 
 struct DissectionOptions {
-  std::uint8_t liver_label = 3;   ///< label of the liver in the label map given
+  /// Label of the liver in the label map given (the organ registry's); 0 = none: the bed comes
+  /// from the CT or the liver's direction.
+  std::uint8_t liver_label = 0;
   double bed_distance_mm = 2.0;   ///< a surface point touching liver voxels within this distance is in the bed (default 2)
   /// Without a liver label, the bed is found in the CT when one is given (`ct`), else it is the
   /// part of the surface whose normal is within `bed_angle_deg` of `bed_direction_lps` (the liver

@@ -177,7 +177,9 @@ Polyline smooth_polyline(const Polyline& line, double sigma_mm) {
 
 Centerline trachea_centerline(const LabelMap& labels, const CenterlineOptions& o) {
   const ImageGrid& g = labels.grid;
-  const std::string organ = label_name(o.label);
+  if (o.label == 0)
+    throw UsageError("the centreline needs the lumen's label (0 is background)", "give CenterlineOptions::label");
+  const std::string& organ = o.organ;
   // Bounding box of the label.
   std::array<std::int64_t, 3> lo{g.size_vox[0], g.size_vox[1], g.size_vox[2]}, hi{-1, -1, -1};
   std::int64_t count = 0;

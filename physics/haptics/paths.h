@@ -36,7 +36,9 @@ Polyline smooth_polyline(const Polyline& line, double sigma_mm);
 // ---- trachea centreline --------------------------------------------------------------------------
 
 struct CenterlineOptions {
-  std::uint8_t label = 2;          ///< label of the lumen (2 = trachea, see core/volume.h)
+  /// Label of the lumen in the label map (required; the organ registry's, e.g. the trachea's).
+  std::uint8_t label = 0;
+  std::string organ = "airway";   ///< the lumen's organ, as errors name it
   double spacing_mm = 1.0;         ///< output point spacing, mm (default 1)
   double smoothing_mm = 3.0;       ///< σ of the Gaussian smoothing along the line, mm (default 3)
   /// Exponent p of the medialness cost 1/(distance-to-wall)^p of the minimal path (default 2).
@@ -56,7 +58,8 @@ struct Centerline {
 /// the cost 1/(distance to the wall)^p, so the path runs through the centres of the maximal
 /// inscribed spheres; smoothed, extended along its end tangents to the lumen boundary (the
 /// iso-surface half way between lumen and background voxels) so that it reaches both ends, and
-/// resampled. Throws InputError (exit code 60) when the label is absent or too small.
+/// resampled. Throws InputError (exit code 60) when the label is absent or too small, UsageError when
+/// options.label is 0 (background).
 Centerline trachea_centerline(const LabelMap& labels, const CenterlineOptions& options = {});
 
 // ---- trachea incision path -----------------------------------------------------------------------

@@ -70,11 +70,11 @@ constexpr float max = 3071.0f;
 
 struct Tissue {
   float hu;
-  Label label;
+  PhantomLabel label;
 };
 
-constexpr Tissue kAir{hu::air, Label::background};
-inline Tissue body(float value) { return {value, Label::body}; }
+constexpr Tissue kAir{hu::air, PhantomLabel::background};
+inline Tissue body(float value) { return {value, PhantomLabel::body}; }
 
 double sq(double v) { return v * v; }
 double lerp(double a, double b, double t) { return a + (b - a) * t; }
@@ -556,7 +556,7 @@ class Model {
 
   Tissue classify(const SliceContext& s, const RowContext& r, double x) const;
   /// A point deep inside each organ, from which the seed search starts.
-  V3 preferred_seed(Label organ) const;
+  V3 preferred_seed(PhantomLabel organ) const;
 
  private:
   std::optional<Tissue> spine(const SliceContext& s, double x, double y) const;
@@ -630,7 +630,7 @@ std::optional<Tissue> Model::airway(const SliceContext& s, const RowContext& r, 
   const double y = r.y;
   if (s.trachea) {
     const double rho2 = sq(x - s.trachea_x) + sq(y - s.trachea_y);
-    if (rho2 < sq(a_.trachea_lumen_r)) return Tissue{hu::air, Label::trachea};
+    if (rho2 < sq(a_.trachea_lumen_r)) return Tissue{hu::air, PhantomLabel::trachea};
     if (rho2 < sq(a_.trachea_lumen_r + a_.trachea_wall)) return body(hu::airway_wall);
   }
   if (s.bronchus_count == 0) return std::nullopt;
@@ -639,9 +639,9 @@ std::optional<Tissue> Model::airway(const SliceContext& s, const RowContext& r, 
   for (int i = 0; i < s.bronchus_count; ++i)
     e = std::min(e, a_.bronchi[std::size_t(s.bronchi[std::size_t(i)])].excess(p));
   // Bronchi belong to the lungs (label 4); their shared lumen above the division is trachea.
-  if (e < 0.0) return Tissue{hu::air, s.d <= a_.divide_d ? Label::trachea : Label::lungs};
+  if (e < 0.0) return Tissue{hu::air, s.d <= a_.divide_d ? PhantomLabel::trachea : PhantomLabel::lungs};
   if (e < a_.bronchus_wall)
-    return Tissue{hu::airway_wall, lung_region(s, r, x) ? Label::lungs : Label::body};
+    return Tissue{hu::airway_wall, lung_region(s, r, x) ? PhantomLabel::lungs : PhantomLabel::body};
   return std::nullopt;
 }
 
@@ -711,7 +711,7 @@ Tissue Model::thorax(const SliceContext& s, const RowContext& r, double x, doubl
     return body(hu::soft_tissue);
   }
   if (aorta_mm < 3.0) return body(hu::fat);  // the aorta runs in mediastinal fat
-  if (lung_region(s, r, x)) return Tissue{hu::lung, Label::lungs};
+  if (lung_region(s, r, x)) return Tissue{hu::lung, PhantomLabel::lungs};
   return body(hu::fat);  // mediastinal fat
 }
 
@@ -748,7 +748,7 @@ Tissue Model::abdomen(const SliceContext& s, const RowContext& r, double x) cons
   std::optional<int> gb;
   if (s.gallbladder_near) {
     gb = gallbladder(p);
-    if (gb == 1) return Tissue{hu::bile, Label::gallbladder};
+    if (gb == 1) return Tissue{hu::bile, PhantomLabel::gallbladder};
   }
   // Solid organs come with a thin fat capsule so that their outlines stay visible.
   const auto organ = [&](const Ellipsoid& e, double depth_q, float value) -> std::optional<Tissue> {
@@ -770,8 +770,8 @@ Tissue Model::abdomen(const SliceContext& s, const RowContext& r, double x) cons
     if (q < 1.15) return body(hu::fat);
   }
   if (auto t = organ(a_.spleen, s.spleen_q, hu::spleen)) return *t;
-  if (gb == 0) return Tissue{hu::liver, Label::liver};
-  if (gb != -1 && liver(s, x, y)) return Tissue{hu::liver, Label::liver};
+  if (gb == 0) return Tissue{hu::liver, PhantomLabel::liver};
+  if (gb != -1 && liver(s, x, y)) return Tissue{hu::liver, PhantomLabel::liver};
   if (s.psoas_r > 0.0) {
     const double px = std::abs(x) - (s.vb_r + 0.6 * s.psoas_r + 4.0);
     if (sq(px / s.psoas_r) + sq((y - s.vb_y - 2.0) / (1.2 * s.psoas_r)) < 1.0)
@@ -821,18 +821,18 @@ Tissue Model::classify(const SliceContext& s, const RowContext& r, double x) con
   return abdomen(s, r, x);
 }
 
-V3 Model::preferred_seed(Label organ) const {
+V3 Model::preferred_seed(PhantomLabel organ) const {
   switch (organ) {
-    case Label::gallbladder:
+    case PhantomLabel::gallbladder:
       return a_.gb_neck + (0.6 * a_.gb_centre_distance()) * a_.gb_axis;
-    case Label::trachea: {
+    case PhantomLabel::trachea: {
       const double d = 0.5 * a_.carina_d;
       const auto [x, y] = trachea_centre(a_, d);
       return {x, y, d};
     }
-    case Label::liver:
+    case PhantomLabel::liver:
       return {-85.0, 5.0, 335.0};
-    case Label::lungs:
+    case PhantomLabel::lungs:
       return {-85.0, 10.0, 200.0};
     default:
       return {0.0, 0.0, 0.0};
@@ -970,7 +970,7 @@ void synthesize_slices(const Model& model, Volume& ct, LabelMap& truth, Progress
             // Air outside the body needs no classification: only the columns the body can reach
             // (plus one for rounding) go through classify().
             std::fill(hu_row, hu_row + nx, hu::air);
-            std::fill(label_row, label_row + nx, std::uint8_t(Label::background));
+            std::fill(label_row, label_row + nx, std::uint8_t(PhantomLabel::background));
             const double half_width = r.half_width[kBody];
             if (half_width < 0.0) continue;
             const double x0 = g.origin_lps_mm.x(), dx = g.spacing_mm.x();
@@ -1048,7 +1048,7 @@ void add_noise_and_quantize(Volume& ct, double sigma_hu, std::uint64_t seed, Pro
 /// organ whose six neighbours also belong to it, so the seed lies strictly inside even where
 /// the organ is thin on a coarse grid; failing that, any voxel of the organ. Only voxels within
 /// `reach_mm` of the preferred point (per axis) are searched. nullopt when none qualifies.
-std::optional<Eigen::Vector3d> find_seed(const LabelMap& truth, Label organ,
+std::optional<Eigen::Vector3d> find_seed(const LabelMap& truth, PhantomLabel organ,
                                          const Eigen::Vector3d& preferred_lps_mm, double reach_mm) {
   const ImageGrid& g = truth.grid;
   const std::uint8_t value = std::uint8_t(organ);
@@ -1091,6 +1091,18 @@ std::optional<Eigen::Vector3d> find_seed(const LabelMap& truth, Label organ,
 
 }  // namespace
 
+std::string phantom_label_name(PhantomLabel label) {
+  switch (label) {
+    case PhantomLabel::background: return "background";
+    case PhantomLabel::gallbladder: return "gallbladder";
+    case PhantomLabel::trachea: return "trachea";
+    case PhantomLabel::liver: return "liver";
+    case PhantomLabel::lungs: return "lungs";
+    case PhantomLabel::body: return "body";
+  }
+  return "label" + std::to_string(int(label));
+}
+
 Phantom synthesize_phantom(const PhantomOptions& options, Progress& progress) {
   validate(options);
   progress.check_cancelled();
@@ -1110,14 +1122,14 @@ Phantom synthesize_phantom(const PhantomOptions& options, Progress& progress) {
 
   const double top_z = grid.origin_lps_mm.z() + double(grid.size_vox[2] - 1) * grid.spacing_mm.z();
   const double z_per_depth = 1.0 / depth_per_z_mm(grid);
-  for (Label organ : {Label::gallbladder, Label::trachea, Label::liver, Label::lungs}) {
+  for (PhantomLabel organ : {PhantomLabel::gallbladder, PhantomLabel::trachea, PhantomLabel::liver, PhantomLabel::lungs}) {
     const V3 p = model.preferred_seed(organ);
     const Eigen::Vector3d preferred(p.x, p.y, top_z - p.d * z_per_depth);
     // The preferred points lie deep inside their organs, so a small search box nearly always
     // suffices; the whole volume is the fallback for odd grids.
     auto seed = find_seed(out.truth, organ, preferred, 30.0);
     if (!seed) seed = find_seed(out.truth, organ, preferred, 1e7);
-    if (seed) out.seeds_lps_mm[label_name(std::uint8_t(organ))] = *seed;
+    if (seed) out.seeds_lps_mm[phantom_label_name(organ)] = *seed;
   }
   progress.report(1.0, kTask);
   return out;

@@ -24,8 +24,22 @@ struct PhantomOptions {
   double noise_hu = 15.0;       ///< standard deviation of additive Gaussian noise, HU (default 15)
 };
 
-/// A synthesized case: the CT (HU), its ground truth on the same grid (labels 1 gallbladder,
-/// 2 trachea, 3 liver, 4 lungs, 5 body) and one seed per organ, LPS mm, keyed by label name.
+/// The phantom's ground-truth label values. The embedded organ registry (data/organs.toml) gives
+/// its organs the same values (a test holds them equal); every stage asks the registry.
+enum class PhantomLabel : std::uint8_t {
+  background = 0,
+  gallbladder = 1,
+  trachea = 2,
+  liver = 3,
+  lungs = 4,
+  body = 5,  ///< soft tissue and bone inside the skin that no other label claims
+};
+
+/// Lower-case name of a phantom label ("gallbladder", …; the registry's name of that organ).
+std::string phantom_label_name(PhantomLabel label);
+
+/// A synthesized case: the CT (HU), its ground truth on the same grid (PhantomLabel values) and
+/// one seed per organ, LPS mm, keyed by label name.
 struct Phantom {
   Volume ct;
   LabelMap truth;

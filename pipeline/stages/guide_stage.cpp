@@ -116,6 +116,7 @@ std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::p
   if (want_centerline || want_incision) {
     physics::CenterlineOptions co = options.centerline;
     co.label = trachea->label;
+    co.organ = trachea->name;
     const physics::Centerline cl = physics::trachea_centerline(labels, co);
     if (want_centerline)
       emit(cl.line, {{"cranial_extension_mm", cl.end_extension_mm[0]},

@@ -51,8 +51,7 @@ TEST(LabelMap, VolumeInMillilitres) {
   m.grid.size_vox = {10, 10, 10};
   m.grid.spacing_mm = {1.0, 2.0, 5.0};
   m.labels.assign(1000, 0);
-  for (int a = 0; a < 100; ++a) m.labels[a] = std::uint8_t(Label::gallbladder);
+  for (int a = 0; a < 100; ++a) m.labels[a] = 1;
   EXPECT_EQ(m.count(1), 100);
   EXPECT_NEAR(m.volume_ml(1), 100 * 10.0 / 1000.0, 1e-12);
-  EXPECT_EQ(label_name(2), "trachea");
 }

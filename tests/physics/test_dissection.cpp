@@ -110,7 +110,9 @@ TEST(Dissection, FromTheCtOfASyntheticScanMatchesTheKnownBed) {
         ct.hu[std::size_t(ct.grid.offset(i, j, k))] = hu + noise(rng);
       }
   DissectionOptions o;
+  o.liver_label = 3;
   const DissectionPath ref = gallbladder_dissection_path(gb, &liver, o);
+  ASSERT_EQ(ref.bed_source, "liver label");
   const DissectionPath d = gallbladder_dissection_path(gb, nullptr, o, &ct);
   ASSERT_EQ(d.bed_source, "CT intensity");
   expect_valid_path(d, o);

@@ -480,6 +480,9 @@ TEST(HapticsLoop, ThreadRunsPublishesAndSwitchesMode) {
 
 // ---- paths ---------------------------------------------------------------------------------------
 
+// The tubes these tests draw label their lumen 2, as the phantom labels its trachea.
+const CenterlineOptions kLumen{.label = 2, .organ = "trachea"};
+
 TEST(HapticsPaths, ResampleAndSmooth) {
   Polyline p = random_walk(50, 9);
   const Polyline r = resample_polyline(p, 1.0);
@@ -507,7 +510,7 @@ TEST(HapticsPaths, ResampleAndSmooth) {
 TEST(HapticsPaths, CenterlineOfACurvedTubeReachesBothEnds) {
   const double z0 = -70.0, z1 = 60.0;
   const LabelMap lm = tube_labels(6.0, z0, z1);
-  const Centerline cl = trachea_centerline(lm);
+  const Centerline cl = trachea_centerline(lm, kLumen);
   const auto& p = cl.line.points_lps_mm;
   ASSERT_GT(p.size(), 100u);
   // Lumen ends: the iso-surface lies half a slice beyond the first and last lumen slices.
@@ -539,7 +542,7 @@ TEST(HapticsPaths, CenterlineReachesThePhantomLumenEnds) {
   po.noise_hu = 0.0;
   NullProgress progress;
   const Phantom ph = synthesize_phantom(po, progress);
-  const Centerline cl = trachea_centerline(ph.truth);
+  const Centerline cl = trachea_centerline(ph.truth, kLumen);
   // Lumen ends of the ground truth: the first and last slices holding label 2, ± half a slice.
   const auto& g = ph.truth.grid;
   std::int64_t kmin = g.size_vox[2], kmax = -1;
@@ -572,7 +575,7 @@ TEST(HapticsPaths, CenterlineReachesThePhantomLumenEnds) {
 
 TEST(HapticsPaths, IncisionLiesOnTheAnteriorWall) {
   const LabelMap lm = tube_labels(8.5, -70.0, 60.0, {0.8, 0.8, 1.0});
-  Centerline cl = trachea_centerline(lm);
+  Centerline cl = trachea_centerline(lm, kLumen);
   // A straight wall around the straight part of the axis is not what tube_labels made (it curves by
   // ±3 mm); use a straight tube for both.
   LabelMap straight = lm;
@@ -583,7 +586,7 @@ TEST(HapticsPaths, IncisionLiesOnTheAnteriorWall) {
         straight.labels[std::size_t(straight.grid.offset(i, j, k))] =
             (p.z() >= -70 && p.z() <= 60 && std::hypot(p.x(), p.y()) < 8.5) ? 2 : 0;
       }
-  cl = trachea_centerline(straight);
+  cl = trachea_centerline(straight, kLumen);
   const SurfaceIndex wall({tube_wall(8.5, 11.0, -70.5, 60.5)});
   IncisionOptions o;
   const IncisionPath inc = trachea_incision_path(cl, wall, o);
@@ -616,6 +619,7 @@ TEST(HapticsPaths, DissectionFollowsTheLiverBedRim) {
         if (p.z() > 5.0 && p.norm() > 15.0) liver.labels[std::size_t(liver.grid.offset(i, j, k))] = 3;
       }
   DissectionOptions o;
+  o.liver_label = 3;
   o.bed_distance_mm = 1.5;
   const DissectionPath d = gallbladder_dissection_path(gb, &liver, o);
   EXPECT_EQ(d.bed_source, "liver label");

@@ -3,6 +3,7 @@
 // level, seeds and option handling. A coarse grid (2.5 mm pixels, 5 mm slices) keeps it fast.
 
 #include "pipeline/phantom/phantom.h"
+#include "pipeline/case/organ_registry.h"
 
 #include "core/errors.h"
 
@@ -26,11 +27,11 @@ namespace organsmith {
 namespace {
 
 constexpr double kPi = 3.14159265358979323846;
-constexpr std::uint8_t kGallbladder = std::uint8_t(Label::gallbladder);
-constexpr std::uint8_t kTrachea = std::uint8_t(Label::trachea);
-constexpr std::uint8_t kLiver = std::uint8_t(Label::liver);
-constexpr std::uint8_t kLungs = std::uint8_t(Label::lungs);
-constexpr std::uint8_t kBody = std::uint8_t(Label::body);
+constexpr std::uint8_t kGallbladder = std::uint8_t(PhantomLabel::gallbladder);
+constexpr std::uint8_t kTrachea = std::uint8_t(PhantomLabel::trachea);
+constexpr std::uint8_t kLiver = std::uint8_t(PhantomLabel::liver);
+constexpr std::uint8_t kLungs = std::uint8_t(PhantomLabel::lungs);
+constexpr std::uint8_t kBody = std::uint8_t(PhantomLabel::body);
 
 PhantomOptions small_options() {
   PhantomOptions o;
@@ -102,6 +103,19 @@ std::uint8_t label_at(const LabelMap& truth, const Eigen::Vector3d& p_lps_mm) {
 }
 
 // --- Determinism ---------------------------------------------------------------------------
+
+// The phantom's ground truth is read through the embedded registry by every stage: each of its
+// organs must have the phantom's value there, and the seeds are keyed by the registry's names.
+TEST(Phantom, LabelsAreTheEmbeddedRegistrysLabels) {
+  const OrganRegistry& registry = builtin_organ_registry();
+  for (PhantomLabel l : {PhantomLabel::gallbladder, PhantomLabel::trachea, PhantomLabel::liver, PhantomLabel::lungs,
+                         PhantomLabel::body}) {
+    const OrganInfo* organ = registry.find(phantom_label_name(l));
+    ASSERT_NE(organ, nullptr) << phantom_label_name(l) << " is not in data/organs.toml";
+    EXPECT_EQ(int(organ->label), int(l)) << phantom_label_name(l);
+  }
+  EXPECT_EQ(registry.find_label(0), nullptr);
+}
 
 TEST(Phantom, SameSeedGivesIdenticalOutputOnAnyThreadCount) {
   const Phantom& a = small_phantom();

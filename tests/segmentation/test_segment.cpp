@@ -71,8 +71,8 @@ TEST(SegmentPhantom, BothOrgansDiceAtLeast095) {
   NullProgress np;
   const SegmentationResult r =
       segment_organs(ph.ct, {{"gallbladder", ph.seeds_lps_mm.at("gallbladder"), {}}, {"trachea", {}, {}}}, {}, np);
-  const Score gb = score(ph.truth, std::uint8_t(Label::gallbladder), r.labels, 1);
-  const Score tr = score(ph.truth, std::uint8_t(Label::trachea), r.labels, 2);
+  const Score gb = score(ph.truth, std::uint8_t(PhantomLabel::gallbladder), r.labels, 1);
+  const Score tr = score(ph.truth, std::uint8_t(PhantomLabel::trachea), r.labels, 2);
   RecordProperty("gallbladder_dice", std::to_string(gb.dice));
   RecordProperty("trachea_dice", std::to_string(tr.dice));
   std::printf("phantom: gallbladder Dice %.4f (volume %+.1f %%), trachea Dice %.4f (volume %+.1f %%)\n", gb.dice,
@@ -98,8 +98,8 @@ TEST(SegmentPhantom, ThinSlicesAndAnotherSeedStillDiceAtLeast095) {
   const Phantom ph = synthesize_phantom(po, np);
   const SegmentationResult r =
       segment_organs(ph.ct, {{"gallbladder", ph.seeds_lps_mm.at("gallbladder"), {}}, {"trachea", {}, {}}}, {}, np);
-  const Score gb = score(ph.truth, std::uint8_t(Label::gallbladder), r.labels, 1);
-  const Score tr = score(ph.truth, std::uint8_t(Label::trachea), r.labels, 2);
+  const Score gb = score(ph.truth, std::uint8_t(PhantomLabel::gallbladder), r.labels, 1);
+  const Score tr = score(ph.truth, std::uint8_t(PhantomLabel::trachea), r.labels, 2);
   std::printf("phantom, 1 mm slices, seed 7: gallbladder Dice %.4f (volume %+.1f %%), trachea Dice %.4f (volume %+.1f %%)\n",
               gb.dice, 100 * gb.volume_error, tr.dice, 100 * tr.volume_error);
   EXPECT_GE(gb.dice, 0.95);

@@ -449,15 +449,15 @@ TEST(SegmentSweep, AirJoinedBehindTheTracheaOnThickSlicesIsNotTheCarina) {
 }
 
 TEST(SegmentSweep, PhantomGallbladder) {
-  sweep("phantom 256x256x160", phantom_scan(std::uint8_t(Label::gallbladder), "gallbladder"), "gallbladder", true, false, 0);
+  sweep("phantom 256x256x160", phantom_scan(std::uint8_t(PhantomLabel::gallbladder), "gallbladder"), "gallbladder", true, false, 0);
 }
 
 TEST(SegmentSweep, PhantomTrachea) {
-  sweep("phantom 256x256x160", phantom_scan(std::uint8_t(Label::trachea), "trachea"), "trachea", false, false, 0.97);
+  sweep("phantom 256x256x160", phantom_scan(std::uint8_t(PhantomLabel::trachea), "trachea"), "trachea", false, false, 0.97);
 }
 
 TEST(SegmentSweep, IngestReordersASagittalSeriesToAxialSlices) {
-  const Scan base = phantom_scan(std::uint8_t(Label::gallbladder), "gallbladder");
+  const Scan base = phantom_scan(std::uint8_t(PhantomLabel::gallbladder), "gallbladder");
   const Scan sag = stored_sagittal(base);
   ScratchDir tmp("sweep_sagittal");
   write_volume_file(sag.ct, tmp.path() / "sagittal.nii");
@@ -559,7 +559,7 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
         if (d.max_turn_deg_per_mm > 30.0 && name.rfind("cut at", 0) != 0)
           row.failures += "dissection path turns more than 30°/mm; ";
       } else if (o.spec.name == "trachea") {
-        const physics::Centerline cl = physics::trachea_centerline(seg.labels);
+        const physics::Centerline cl = physics::trachea_centerline(seg.labels, {.label = o.spec.label, .organ = o.spec.name});
         const physics::SurfaceIndex wall({o.surfaces.at(0).mesh});
         const physics::IncisionPath inc = physics::trachea_incision_path(cl, wall);
         std::snprintf(buf, sizeof buf, "centreline %.0f mm, incision %.0f mm, off-wall %.2f mm", cl.line.length_mm(),
