@@ -319,6 +319,29 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
             "[stages.mesh] pressure_kPa names '" + organ + "', which is no organ with a lumen", origin,
             "organs with a lumen have mesh = \"wall_body\" or \"tube\" in the organ registry");
   }
+  // Organ lists: the organs must be the registry's, with a wall (solver load cases are made for
+  // wall_body and tube organs), and an organ pressed in a snapshot must have the probe as its load
+  // case (the registry's, or [stages.mesh] indentation).
+  const auto has_wall = [&](const std::string& organ) {
+    const OrganInfo* info = c.registry.find(organ);
+    return info && (info->mesh == OrganMeshModel::wall_body || info->mesh == OrganMeshModel::tube);
+  };
+  const std::string wall_hint = "organs with a wall have mesh = \"wall_body\" or \"tube\" in the organ registry";
+  for (const auto& organ : c.stages.mesh.indentation)
+    fail_if(!has_wall(organ), "[stages.mesh] indentation names '" + organ + "', which is no organ with a wall", origin,
+            wall_hint);
+  for (const auto& organ : c.stages.simulate.organs)
+    fail_if(!has_wall(organ), "[stages.simulate] organs names '" + organ + "', which is no organ with a load case",
+            origin, wall_hint);
+  for (const auto& organ : c.stages.snapshot.indent) {
+    const auto& ind = c.stages.mesh.indentation;
+    const bool pressed = std::find(ind.begin(), ind.end(), organ) != ind.end() ||
+                         (has_wall(organ) && c.registry.find(organ)->load_case == "indentation" &&
+                          !c.stages.mesh.pressure_kPa.count(organ));
+    fail_if(!has_wall(organ) || !pressed,
+            "[stages.snapshot] indent names '" + organ + "', whose load case is not the probe", origin,
+            "an organ is pressed when its registry's load_case is \"indentation\" or [stages.mesh] indentation names it");
+  }
   if (const toml::table* presets = root["stages"]["segment"]["presets"].as_table()) {
     std::ostringstream ts;
     ts << toml::toml_formatter{*presets};

@@ -36,6 +36,9 @@ class Visitor {
   virtual void choice(const char* key, std::string& v, const std::vector<std::string>& allowed, const char* doc) = 0;
   virtual void subset(const char* key, std::vector<std::string>& v, const std::vector<std::string>& allowed,
                       const char* doc) = 0;
+  /// A list of organ names (checked against the registry by the caller: the case's own registry
+  /// is known only there).
+  virtual void organs(const char* key, std::vector<std::string>& v, const char* doc) = 0;
   /// A table of organ name → number (organ names are checked against the registry by the caller).
   virtual void per_organ(const char* key, std::map<std::string, double>& v, double lo, double hi, const char* unit,
                          const char* doc) = 0;
@@ -56,8 +59,8 @@ void visit(Visitor& v, MeshStageOptions& o) {
            "a mesh still missing a quality gate after meshing's remedies: enforce (stop, exit 61; default) or report "
            "(warn, quality.json)");
   v.boolean("linear_tets", o.linear_tets, "linear tetrahedra (C3D4/tet4) instead of quadratic (C3D10/tet10)");
-  v.subset("indentation", o.indentation, {"gallbladder", "trachea"},
-           "organs pressed by the thesis' rigid probe instead of a pressure, e.g. [\"trachea\"] (its anterior wall "
+  v.organs("indentation", o.indentation,
+           "organs with a wall pressed by the thesis' rigid probe instead of a pressure, e.g. [\"trachea\"] (its anterior wall "
            "halfway between the cuts, both cuts held); [] = each organ's registry load case");
   v.per_organ("pressure_kPa", o.pressure_kPa, 0.0, 100.0, "kPa",
               "a lumen pressure load step for the organs named, e.g. { trachea = 1.0 } (for the gallbladder instead of "
@@ -71,7 +74,7 @@ void visit(Visitor& v, MeshStageOptions& o) {
 
 void visit(Visitor& v, SimulateStageOptions& o) {
   v.boolean("enabled", o.enabled, "run the organs' load cases in CalculiX during `run`");
-  v.subset("organs", o.organs, {"gallbladder", "trachea"}, "organs to simulate; [] = every organ with a load case");
+  v.organs("organs", o.organs, "organs with a wall to simulate; [] = every organ with a load case");
   v.integer("threads", o.threads, 0, 1024, "solver threads; 0 = every core");
   v.number("timeout_s", o.timeout_s, 0.0, 1.0e6, "s", "stop a solver run after this long; 0 = no limit");
   v.boolean("band", o.band, "also run the material band's variants ([stages.mesh] material_band) and report a band");
@@ -99,8 +102,8 @@ void visit(Visitor& v, SnapshotStageOptions& o) {
   v.integer("width_px", o.width_px, 64, 8192, "PNG width, pixels");
   v.integer("height_px", o.height_px, 64, 8192, "PNG height, pixels");
   v.subset("views", o.views, kViews, "views to draw");
-  v.subset("indent", o.indent, {"gallbladder"},
-           "organs pressed by the simulate stage's 5 mm probe through organsmith's finite-element model and drawn "
+  v.organs("indent", o.indent,
+           "organs whose load case is the probe, pressed by the simulate stage's 5 mm probe through organsmith's finite-element model and drawn "
            "deformed, coloured by stress (snapshots/indent_<organ>.png; about 30 s each); [] = none");
 }
 
@@ -183,6 +186,20 @@ class Parser final : public Visitor {
     v = out;
   }
 
+  void organs(const char* key, std::vector<std::string>& v, const char*) override {
+    const toml::node* n = take(key);
+    if (!n) return;
+    const toml::array* a = n->as_array();
+    if (!a) fail(*n, key, "must be an array of organ names", "e.g. " + std::string(key) + " = [\"trachea\"]");
+    std::vector<std::string> out;
+    for (const auto& item : *a) {
+      const auto x = item.value_exact<std::string>();
+      if (!x) fail(item, key, "must hold organ names (strings) only", "e.g. " + std::string(key) + " = [\"trachea\"]");
+      if (std::find(out.begin(), out.end(), *x) == out.end()) out.push_back(*x);
+    }
+    v = out;
+  }
+
   void per_organ(const char* key, std::map<std::string, double>& v, double lo, double hi, const char* unit,
                  const char*) override {
     const toml::node* n = take(key);
@@ -250,6 +267,7 @@ class JsonWriter final : public Visitor {
   void subset(const char* key, std::vector<std::string>& v, const std::vector<std::string>&, const char*) override {
     j[key] = v;
   }
+  void organs(const char* key, std::vector<std::string>& v, const char*) override { j[key] = v; }
   void per_organ(const char* key, std::map<std::string, double>& v, double, double, const char*, const char*) override {
     j[key] = v.empty() ? nlohmann::json::object() : nlohmann::json(v);
   }
@@ -276,6 +294,11 @@ class TomlWriter final : public Visitor {
     std::vector<std::string> quoted;
     for (const auto& s : v) quoted.push_back("\"" + s + "\"");
     line(key, "[" + join(quoted) + "]", std::string(doc) + "; any of " + join(allowed));
+  }
+  void organs(const char* key, std::vector<std::string>& v, const char* doc) override {
+    std::vector<std::string> quoted;
+    for (const auto& s : v) quoted.push_back("\"" + s + "\"");
+    line(key, "[" + join(quoted) + "]", std::string(doc) + "; names from the organ registry");
   }
   void per_organ(const char* key, std::map<std::string, double>& v, double lo, double hi, const char* unit,
                  const char* doc) override {

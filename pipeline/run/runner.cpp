@@ -210,10 +210,14 @@ class Runner {
 
     // A case with no organ can only be read (--until ingest): there is nothing to segment or mesh.
     // Checked after ingest, so that a bad input is reported as what it is first.
-    if (case_.organs.empty() && !done_)
+    if (case_.organs.empty() && !done_) {
+      std::string names;
+      for (const auto& n : case_.registry.modelled()) names += (names.empty() ? "\"" : ", \"") + n + "\"";
       throw CaseFileError("the case names no organ to model", case_.source,
-                          "add [[organ]] tables (name = \"gallbladder\" with a seed, name = \"trachea\"), or run "
-                          "--until ingest to only read the input");
+                          "add [[organ]] tables (name = one of " + names +
+                              "; an organ segmented from a seed takes seed_lps_mm), or run --until ingest to only "
+                              "read the input");
+    }
     if (!case_.organs.empty()) {
       const nlohmann::json seg_opts = stage_json(case_, "segment");
       execute({"segment", fingerprint("segment", seg_opts.dump() + registry_digest() + outputs_digest("ingest")),

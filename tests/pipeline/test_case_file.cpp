@@ -197,6 +197,26 @@ TEST(CaseFile, StageOptionTyposWrongTypesAndRangesAreErrorsWithLineKeyAndWhatIsA
   EXPECT_TRUE(has(e, "takes no options")) << e;
 }
 
+// Organ lists are checked against the case's registry, not a list in the code: an organ without a
+// wall has no load case; a snapshot presses only an organ whose load case is the probe.
+TEST(CaseFile, OrganListsNameTheRegistrysOrgansWithTheRightLoadCase) {
+  std::string e = case_error("[stages.simulate]\norgans = [\"liver\"]\n");
+  EXPECT_TRUE(has(e, "'liver'") && has(e, "no organ with a load case")) << e;
+  e = case_error("[stages.mesh]\nindentation = [\"spleen\"]\n");
+  EXPECT_TRUE(has(e, "'spleen'") && has(e, "no organ with a wall")) << e;
+  e = case_error("[stages.mesh]\nindentation = [3]\n");
+  EXPECT_TRUE(has(e, "organ names") && has(e, "line 2")) << e;
+  e = case_error("[stages.snapshot]\nindent = [\"trachea\"]\n");
+  EXPECT_TRUE(has(e, "'trachea'") && has(e, "not the probe")) << e;
+  e = case_error("[stages.mesh]\npressure_kPa = { gallbladder = 1.0 }\n[stages.snapshot]\nindent = [\"gallbladder\"]\n");
+  EXPECT_TRUE(has(e, "'gallbladder'") && has(e, "not the probe")) << e;
+  // The trachea pressed on its anterior wall can be drawn under the probe.
+  const CaseFile c = parse_case("[case]\ninput = \"phantom\"\n[stages.mesh]\nindentation = [\"trachea\"]\n[stages.snapshot]\nindent = [\"trachea\", "
+                                "\"gallbladder\"]\n[stages.simulate]\norgans = [\"trachea\"]\n",
+                                "/cases/test.toml");
+  EXPECT_EQ(c.stages.snapshot.indent, (std::vector<std::string>{"trachea", "gallbladder"}));
+}
+
 TEST(CaseFile, PrintedDefaultCaseListsEveryOptionAndParsesBackToTheDefaults) {
   const std::string text = default_case_with_options_text();
   const CaseFile printed = parse_case(text, {});
