@@ -2,6 +2,7 @@
 // every simulator format with a quality.json per organ (meshing/mesh.h, meshing/export.h).
 
 #include "core/errors.h"
+#include "core/format.h"
 #include "meshing/export.h"
 #include "meshing/mesh.h"
 #include "physics/materials/presets.h"
@@ -19,6 +20,7 @@
 #include <spdlog/spdlog.h>
 
 #include <chrono>
+#include <cmath>
 #include <fstream>
 #include <memory>
 #include <sstream>
@@ -37,7 +39,7 @@ struct MeshFlags {
   bool ras = false;
   bool force = false;  // `mesh DIR`: redo the stage even when unchanged
   std::vector<std::string> organs;  // NAME or NAME=LABEL
-  double gallbladder_wall_mm = 0.0, trachea_wall_mm = 0.0;  // 0 = the organ registry's
+  std::vector<std::string> wall_mm;  // ORGAN=MM; an organ not named keeps the organ registry's wall
   bool no_tets = false, allow_failures = false;
   bool material_band = false;
   double max_fold_deg = -1.0;  // < 0 = not given: off, or the run's [stages.mesh] max_fold_deg
@@ -52,11 +54,39 @@ std::vector<std::string> split(const std::string& s, char sep) {
   return out;
 }
 
+/// --wall-mm ORGAN=MM, each naming an organ of `registry` with a wall and a positive thickness.
+std::map<std::string, double> wall_flags(const MeshFlags& f, const OrganRegistry& registry) {
+  std::map<std::string, double> walls;
+  for (const auto& item : f.wall_mm) {
+    const auto eq = item.find('=');
+    const std::string name = item.substr(0, eq);
+    const OrganInfo* info = registry.find(name);
+    std::string walled;
+    for (const auto& o : registry.organs)
+      if (o.mesh == OrganMeshModel::wall_body || o.mesh == OrganMeshModel::tube) walled += (walled.empty() ? "" : ", ") + o.name;
+    if (eq == std::string::npos || name.empty())
+      throw UsageError("--wall-mm " + item + ": write ORGAN=MM", "e.g. --wall-mm gallbladder=3 (organs with a wall: " + walled + ")");
+    if (!info || (info->mesh != OrganMeshModel::wall_body && info->mesh != OrganMeshModel::tube))
+      throw UsageError("--wall-mm " + item + ": '" + name + "' is no organ with a wall", "organs with a wall: " + walled);
+    double mm = 0.0;
+    std::size_t used = 0;
+    const std::string value = item.substr(eq + 1);
+    try {
+      mm = std::stod(value, &used);
+    } catch (...) {
+      used = 0;
+    }
+    if (used == 0 || used != value.size() || !std::isfinite(mm) || !(mm > 0))
+      throw UsageError("--wall-mm " + item + ": the thickness must be a positive number of millimetres",
+                       "e.g. --wall-mm " + name + "=" + format_g(info->wall_mm, 3) + " (the registry's)");
+    walls[name] = mm;
+  }
+  return walls;
+}
+
 std::vector<MeshOrganSpec> organ_specs(const MeshFlags& f) {
   const OrganRegistry& registry = builtin_organ_registry();
-  std::map<std::string, double> walls;
-  if (f.gallbladder_wall_mm > 0) walls["gallbladder"] = f.gallbladder_wall_mm;
-  if (f.trachea_wall_mm > 0) walls["trachea"] = f.trachea_wall_mm;
+  const std::map<std::string, double> walls = wall_flags(f, registry);
   std::vector<MeshOrganSpec> specs;
   for (const auto& name : registry.modelled()) specs.push_back(mesh_spec(registry.at(name), walls));
   if (f.organs.empty()) return specs;
@@ -104,8 +134,7 @@ int continue_run(const MeshFlags& f) {
   if (f.no_tets) m.tetrahedra = false;
   if (f.material_band) m.material_band = true;
   if (f.max_fold_deg >= 0) m.max_fold_deg = f.max_fold_deg;
-  if (f.gallbladder_wall_mm > 0) m.wall_mm["gallbladder"] = f.gallbladder_wall_mm;
-  if (f.trachea_wall_mm > 0) m.wall_mm["trachea"] = f.trachea_wall_mm;
+  for (const auto& [organ, mm] : wall_flags(f, c.registry)) m.wall_mm[organ] = mm;
   m.quality_gate = f.allow_failures ? "report" : "enforce";
   {
     const auto known = all_mesh_formats();
@@ -205,10 +234,9 @@ std::vector<Command> meshing_commands(CLI::App& app) {
   sub->add_option("--organ", flags->organs,
                   "organ to mesh, NAME or NAME=LABEL (default: gallbladder=1 trachea=2); gallbladder gets a wall and "
                   "a body, trachea a tube wall around its lumen, other names one solid body");
-  sub->add_option("--gallbladder-wall-mm", flags->gallbladder_wall_mm, "gallbladder wall thickness in mm (default: the organ registry's, 2)")
-      ->check(CLI::PositiveNumber);
-  sub->add_option("--trachea-wall-mm", flags->trachea_wall_mm, "trachea wall thickness in mm (default: the organ registry's, 2.5)")
-      ->check(CLI::PositiveNumber);
+  sub->add_option("--wall-mm", flags->wall_mm,
+                  "wall thickness of an organ with a wall, ORGAN=MM, repeatable (default: the organ registry's:\n"
+                  "gallbladder 2, trachea 2.5), e.g. --wall-mm gallbladder=3");
   sub->add_option("--max-fold-deg", flags->max_fold_deg,
                   "fold gate of an organ's uncut outer surface (gallbladder): largest angle between neighbouring triangles,\n"
                   "deg; a mesh failing it is remeshed smoother (default 0 = off; 60 for solver meshes on coarse scans)")

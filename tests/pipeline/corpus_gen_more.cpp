@@ -59,8 +59,9 @@ std::vector<CorpusCase> label_map_corpus(const fs::path& root, std::mt19937& rng
   const std::vector<float> good = labels16(ball);
   for (const char* edge : {"0", "-1", "nan", "inf", "1e9", "0.001", "abc"})
     add(std::string("--edge-mm ") + edge, true, 2, good, std::string(" --edge-mm ") + edge);
-  for (const char* wall : {"1000", "nan", "-2", "0"})
-    add(std::string("--gallbladder-wall-mm ") + wall, true, 2, good, std::string(" --gallbladder-wall-mm ") + wall);
+  for (const char* wall : {"gallbladder=1000", "gallbladder=nan", "gallbladder=-2", "gallbladder=0", "gallbladder=2mm", "gallbladder",
+                           "=2", "liver=2", "spleen=2"})
+    add(std::string("--wall-mm ") + wall, true, 2, good, std::string(" --wall-mm ") + wall);
   add("--formats none", true, 2, good, " --formats nonsense");
   return cases;
 }

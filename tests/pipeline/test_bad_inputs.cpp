@@ -125,7 +125,7 @@ TEST(BadInputs, MeshOptionsOutOfReachOfTheDataStopAtOnce) {
       for (std::int64_t i = 10; i < 30; ++i) lm.labels[lm.grid.offset(i, j, k)] = 1;
   write_label_map(lm, tmp / "block.nii.gz");
   std::string log;
-  for (const std::string flags : {"--edge-mm 1e9", "--edge-mm 0.001", "--gallbladder-wall-mm 1000"}) {
+  for (const std::string flags : {"--edge-mm 1e9", "--edge-mm 0.001", "--wall-mm gallbladder=1000"}) {
     const auto t0 = std::chrono::steady_clock::now();
     EXPECT_EQ(run_cli("mesh " + quoted(tmp / "block.nii.gz") + " --organ gallbladder " + flags + " --out " + quoted(tmp / "out"),
                       &log),
