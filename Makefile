@@ -14,9 +14,14 @@ all: build
 deps:
 	@scripts/install-deps
 
+# CMake runs when the build directory is new or CMAKE_ARGS changed; otherwise Ninja re-runs it
+# itself whenever a CMakeLists.txt changes (this saves `make demo` a second and a half).
 configure: deps
-	@cmake -S . -B $(BUILD_DIR) -G Ninja -DCMAKE_BUILD_TYPE=Release $(CMAKE_ARGS) > $(BUILD_DIR).configure.log 2>&1 \
-	  || { cat $(BUILD_DIR).configure.log; exit 1; }
+	@if [ ! -f $(BUILD_DIR)/build.ninja ] || [ "$$(cat $(BUILD_DIR)/.make-cmake-args 2>/dev/null)" != "$(CMAKE_ARGS)" ]; then \
+	  cmake -S . -B $(BUILD_DIR) -G Ninja -DCMAKE_BUILD_TYPE=Release $(CMAKE_ARGS) > $(BUILD_DIR).configure.log 2>&1 \
+	    || { cat $(BUILD_DIR).configure.log; exit 1; }; \
+	  printf '%s' "$(CMAKE_ARGS)" > $(BUILD_DIR)/.make-cmake-args; \
+	fi
 
 build: configure
 	@cmake --build $(BUILD_DIR) -j $(JOBS)
