@@ -116,6 +116,23 @@ Scan crop_through_organ(const Scan& s, double fraction, bool keep_low_k) {
   return out;
 }
 
+Scan shifted_origin(const Scan& s, const Eigen::Vector3d& shift_mm) {
+  Scan out = s;
+  out.ct.grid.origin_lps_mm += shift_mm;
+  out.ref.grid.origin_lps_mm += shift_mm;
+  out.seed_lps_mm += shift_mm;
+  return out;
+}
+
+Scan scaled_spacing(const Scan& s, double factor) {
+  Scan out = s;
+  const Eigen::Vector3d index = s.ct.grid.lps_mm_to_index(s.seed_lps_mm);
+  out.ct.grid.spacing_mm *= factor;
+  out.ref.grid.spacing_mm *= factor;
+  out.seed_lps_mm = out.ct.grid.index_to_lps_mm(index);
+  return out;
+}
+
 Scan stored_ras(const Scan& s) {
   const ImageGrid& g = s.ct.grid;
   const auto& n = g.size_vox;

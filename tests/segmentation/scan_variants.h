@@ -30,6 +30,14 @@ Scan resample_slices(const Scan& s, double slice_mm);
 /// the volume's last slice (`keep_low_k`) or its first one; the seed moves to the kept part.
 Scan crop_through_organ(const Scan& s, double fraction, bool keep_low_k);
 
+/// The same voxels with the grid's origin moved by `shift_mm` (LPS): the scan, its reference and
+/// its seed move together (a scanner placing the same anatomy a fraction of a voxel elsewhere).
+Scan shifted_origin(const Scan& s, const Eigen::Vector3d& shift_mm);
+
+/// The same voxels with every spacing times `factor` about the origin (a calibration of ±0.5 %):
+/// the anatomy scales with it, the seed too.
+Scan scaled_spacing(const Scan& s, double factor);
+
 /// Stored in RAS order: i and j reversed, same voxels at the same positions.
 Scan stored_ras(const Scan& s);
 

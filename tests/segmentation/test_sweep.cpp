@@ -482,6 +482,7 @@ struct MeshRow {
   std::string remedies;
   std::string paths;     ///< the paths' figures
   std::string gates;     ///< each gate's figure for this variant
+  double volume_error_max = 0;  ///< largest |volume error| of its surfaces compared with the label
   double seconds = 0;
 };
 
@@ -498,9 +499,10 @@ struct GateExtremes {
   }
 };
 
-/// `tet_edge_mm`: the tetrahedra's edge (`run`'s default, MeshStageOptions; 0 = the surface edge).
+/// `tet_edge_mm`: the tetrahedra's edge (`run`'s default, MeshStageOptions; 0 = the surface edge);
+/// `edge_mm`: the surfaces' (run's default, 1.5).
 MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string& organ, bool seeded, double tet_edge_mm,
-                     GateExtremes& worst) {
+                     GateExtremes& worst, double edge_mm = MeshStageOptions{}.edge_mm) {
   const Scan s = as_ingested(raw);
   NullProgress np;
   OrganRequest req{organ, {}, {}};
@@ -510,6 +512,7 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
   mo.organs = {mesh_spec(builtin_organ_registry().at(organ))};
   mo.enforce_quality = false;
   mo.tet_edge_mm = tet_edge_mm;
+  mo.edge_mm = edge_mm;
   MeshRow row;
   const auto t0 = std::chrono::steady_clock::now();
   try {
@@ -528,7 +531,10 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
         row.gates += g;
         worst.angle_min_deg = std::min(worst.angle_min_deg, q.angle_min_deg);
         worst.edge_fraction_min = std::min(worst.edge_fraction_min, q.edge_within_tolerance);
-        if (q.reference_volume_mm3 > 0) worst.volume_error_max = std::max(worst.volume_error_max, std::abs(q.volume_error));
+        if (q.reference_volume_mm3 > 0) {
+          worst.volume_error_max = std::max(worst.volume_error_max, std::abs(q.volume_error));
+          row.volume_error_max = std::max(row.volume_error_max, std::abs(q.volume_error));
+        }
         worst.fold_max_deg = std::max(worst.fold_max_deg, q.fold_max_deg);
       }
       if (o.volume_quality.tets > 0) {
@@ -572,11 +578,60 @@ MeshRow mesh_variant(const std::string& name, const Scan& raw, const std::string
     row.failures = std::string("error: ") + e.what();
   }
   row.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  std::printf("| %-12s | %-22s | tets %.1f mm | %s | %5.1f s | %s | %s | %s\n", organ.c_str(), name.c_str(), tet_edge_mm,
+  std::printf("| %-12s | %-22s | edge %.1f, tets %.1f mm | %s | %5.1f s | %s | %s | %s\n", organ.c_str(), name.c_str(), edge_mm, tet_edge_mm,
               row.failures.empty() ? "all gates pass, paths valid" : row.failures.c_str(), row.seconds,
               row.gates.c_str(), row.paths.c_str(), row.remedies.empty() ? "first mesh" : row.remedies.c_str());
   std::fflush(stdout);
   return row;
+}
+
+/// The sub-voxel and calibration variants every organ's sweep adds (issue 39): the origin moved by
+/// a hundredth of a millimetre and by half a millimetre, the spacing ±0.5 %.
+void add_grid_variants(std::vector<std::pair<std::string, Scan>>& v, const Scan& base) {
+  v.push_back({"origin +0.01 mm", shifted_origin(base, Eigen::Vector3d::Constant(0.01))});
+  v.push_back({"origin +0.5/0.37/0.23 mm", shifted_origin(base, Eigen::Vector3d(0.5, 0.37, 0.23))});
+  v.push_back({"spacing +0.5 %", scaled_spacing(base, 1.005)});
+  v.push_back({"spacing -0.5 %", scaled_spacing(base, 0.995)});
+}
+
+/// Surface edges where a mesh stays short of a gate after the remedies, with the figure reached:
+/// held there (it cannot get worse unseen) and printed as short; every other edge must pass.
+/// The airway at coarse edges loses volume to its chords: a remeshed surface keeps its vertices
+/// on the level set, so each flat triangle cuts inside the tube by a²/(8R) on average (edge a,
+/// radius R) and the tube loses a²/(4R²) of its volume: 5.5 % at a = 3 mm for this chest's
+/// R ≈ 6.4 mm, the smoothing's and the support sampling's loss on top. Its reference label meshed
+/// at 1.5, 2, 2.5 and 3 mm: −2.1, −3.2, −3.7, −6.1 % (meshing/README.md "Sweep").
+struct ShortGate {
+  std::string organ;
+  double edge_mm;
+  double volume_error_reached;  ///< |volume error| reached: the only gate short
+};
+const std::vector<ShortGate> kShortOfGate = {{"trachea", 2.5, 0.0371}, {"trachea", 3.0, 0.0635}};
+
+/// The unchanged scan meshed with surface edges from 1.2 to 3 mm at run's tetrahedra.
+void mesh_edge_variants(const Scan& base, const std::string& organ, bool seeded, GateExtremes& worst, bool first_mesh) {
+  for (const double edge_mm : {1.2, 2.0, 2.5, 3.0}) {
+    const MeshRow r = mesh_variant("unchanged", base, organ, seeded, MeshStageOptions{}.tet_edge_mm, worst, edge_mm);
+    const auto held = std::find_if(kShortOfGate.begin(), kShortOfGate.end(),
+                                   [&](const ShortGate& s) { return s.organ == organ && s.edge_mm == edge_mm; });
+    if (held != kShortOfGate.end()) {
+      std::printf("  short of the volume gate (held): %s at a %.1f mm edge, |volume error| %.2f %% (reached %.2f %%)\n",
+                  organ.c_str(), edge_mm, 100 * r.volume_error_max, 100 * held->volume_error_reached);
+      EXPECT_LE(r.volume_error_max, held->volume_error_reached + 0.002) << "surface edge " << edge_mm << " mm";
+      // Only the volume gate is short.
+      std::string others = r.failures;
+      for (std::size_t at; (at = others.find("volume")) != std::string::npos;) {
+        const std::size_t start = others.rfind("; ", at) == std::string::npos ? 0 : others.rfind("; ", at) + 2;
+        others.erase(start, others.find("; ", at) + 2 - start);
+      }
+      EXPECT_TRUE(others.empty()) << "surface edge " << edge_mm << " mm: " << others;
+      continue;
+    }
+    EXPECT_TRUE(r.failures.empty()) << "surface edge " << edge_mm << " mm: " << r.failures;
+    // From 2 mm on, the airway's chord loss alone (2.4 % at 2 mm) leaves no margin in the 3 % gate:
+    // its first mesh fails there and the remedies' finer edge (1.6 mm) passes.
+    if (first_mesh && edge_mm < 2.0) EXPECT_TRUE(r.remedies.empty()) << "surface edge " << edge_mm << " mm: " << r.remedies;
+  }
 }
 
 }  // namespace
@@ -591,6 +646,7 @@ TEST(MeshSweep, RealTracheaVariantsPassEveryGate) {
                                               {"5.0 mm slices", resample_slices(base, 5.0)},
                                               {"cut at high-k edge", crop_through_organ(base, 0.6, true)},
                                               {"oblique 10 deg", tilted(base, 10.0)}};
+  add_grid_variants(v, base);
   // At `run`'s tetrahedral edge and at the surface's (finer tetrahedra, harder to keep in the gate).
   for (const double tet_edge_mm : {MeshStageOptions{}.tet_edge_mm, 0.0})
     for (const auto& [name, s] : v) {
@@ -599,6 +655,7 @@ TEST(MeshSweep, RealTracheaVariantsPassEveryGate) {
       // The tube's first mesh passes: quality of the method, not of the remedies' search.
       EXPECT_TRUE(r.remedies.empty()) << name << ", tetrahedra " << tet_edge_mm << " mm: " << r.remedies;
     }
+  mesh_edge_variants(base, "trachea", false, worst, true);
   worst.print("real trachea mesh sweep");
 }
 
@@ -613,12 +670,21 @@ TEST(MeshSweep, RealGallbladderVariantsPassEveryGate) {
                                               {"cut at high-k edge", crop_through_organ(base, 0.6, true)},
                                               {"cut at low-k edge", crop_through_organ(base, 0.4, false)},
                                               {"oblique 10 deg", tilted(base, 10.0)}};
+  add_grid_variants(v, base);
+  // The seed 2 mm off the reference's centre along each axis, both ways (where a user clicks).
+  for (int a = 0; a < 3; ++a)
+    for (const double d : {-2.0, 2.0}) {
+      Scan s = base;
+      s.seed_lps_mm[a] += d;
+      v.push_back({std::string("seed ") + (d > 0 ? "+" : "-") + "2 mm " + "LPS"[a], s});
+    }
   // At `run`'s tetrahedral edge and at the surface's (finer tetrahedra, harder to keep in the gate).
   for (const double tet_edge_mm : {MeshStageOptions{}.tet_edge_mm, 0.0})
     for (const auto& [name, s] : v) {
       const MeshRow r = mesh_variant(name, s, "gallbladder", true, tet_edge_mm, worst);
       EXPECT_TRUE(r.failures.empty()) << name << ", tetrahedra " << tet_edge_mm << " mm: " << r.failures;
     }
+  mesh_edge_variants(base, "gallbladder", true, worst, false);
   worst.print("real gallbladder mesh sweep");
 }
 
