@@ -13,6 +13,8 @@
 #include "core/sha256.h"
 #include "pipeline/stages/guide_stage.h"
 #include "pipeline/stages/mesh_stage.h"
+#include "pipeline/stages/simulate_stage.h"
+#include "pipeline/review/snapshot_stage.h"
 #include "pipeline/io/ingest.h"
 #include "pipeline/phantom/phantom.h"
 #include "pipeline/io/image_io.h"
@@ -20,12 +22,9 @@
 #include "meshing/export.h"
 #include "meshing/mesh.h"
 #include "physics/haptics/contact.h"
-#include "physics/materials/models.h"
 #include "physics/materials/presets.h"
 #include "core/format.h"
-#include "pipeline/stages/simulate.h"
 #include "pipeline/stages/organ_fe.h"
-#include "pipeline/stages/simulation_picture.h"
 #include "pipeline/output/output_dir.h"
 #include "pipeline/output/output_layout.h"
 #include "pipeline/case/organ_registry.h"
@@ -283,156 +282,15 @@ class Runner {
     model_.meshes = mesh_stage(in, mo, OutputLayout{staging}.meshes_dir(), progress_);
   }
 
-  /// simulate runs every organ's exported load case (meshes/<organ>/<organ>.inp) in CalculiX and
-  /// writes simulation/<organ>.vtu and .json; the solver's log and tables stay in
-  /// simulation/<organ>_solver/.
+  /// simulate: the organs' load cases in CalculiX (stages/simulate_stage.h).
   void write_simulations(const fs::path& staging) {
-    const OutputLayout staged{staging};
-    SimulateOptions so;
-    so.threads = case_.stages.simulate.threads;
-    so.timeout_s = case_.stages.simulate.timeout_s;
-    if (const char* ccx = std::getenv("ORGANSMITH_CCX"); ccx && *ccx) so.solver = ccx;
-    for (const auto& [region, law] : region_materials(case_.registry)) so.calibrated_stretch_max[region] = law.stretch_max;
-    int ran = 0;
-    for (const auto& o : case_.organs) {
-      const OrganInfo& info = case_.registry.at(o.name);
-      if (info.mesh != OrganMeshModel::wall_body && info.mesh != OrganMeshModel::tube) continue;
-      const auto& only = case_.stages.simulate.organs;
-      if (!only.empty() && std::find(only.begin(), only.end(), o.name) == only.end()) {
-        // Not asked for this time: its earlier results stay (carried into the new commit).
-        for (const fs::path& f : {layout_.simulation(o.name, "json"), layout_.simulation(o.name, "vtu"),
-                                   layout_.simulation(o.name, "png"), layout_.indentation_plot(o.name)})
-          if (fs::exists(f)) {
-            fs::create_directories(staged.simulation_dir());
-            fs::copy_file(f, staged.simulation_dir() / f.filename());
-          }
-        if (fs::is_directory(layout_.simulation_work(o.name)))
-          fs::copy(layout_.simulation_work(o.name), staged.simulation_work(o.name), fs::copy_options::recursive);
-        continue;
-      }
-      const fs::path inp = layout_.volume(o.name, "inp");
-      if (!fs::exists(inp)) {
-        spdlog::warn("simulate: {} has no solver input ({}); add \"inp\" to [stages.mesh] formats", o.name, inp.string());
-        continue;
-      }
-      if (!has_load_case(read_solver_inp(inp))) {
-        spdlog::warn("simulate: {} has no load step in {} (its comments say why); skipped", o.name, inp.string());
-        continue;
-      }
-      const fs::path work = staged.simulation_work(o.name);
-      Simulation sim;
-      try {
-        sim = simulate_inp(inp, work, so, progress_);
-      } catch (const SimulationError& e) {
-        // The staging folder goes with the failure: the solver's account is kept where the
-        // message can point to it.
-        std::error_code ec;
-        const fs::path kept = layout_.failed_solver_log(o.name);
-        if (e.path().filename() != "solver.log" || !fs::exists(e.path(), ec)) throw;
-        fs::create_directories(kept.parent_path(), ec);
-        if (!ec) fs::copy_file(e.path(), kept, fs::copy_options::overwrite_existing, ec);
-        if (ec) throw;
-        throw SimulationError(e.code(), e.message(), kept, e.hint());
-      }
-      {
-        std::error_code ec;
-        fs::remove(layout_.failed_solver_log(o.name), ec);
-        fs::remove(layout_.failed_solver_log(o.name).parent_path(), ec);  // only when empty
-      }
-      // Keep the solver's account (log, status, printed totals), not its bulky result file.
-      for (const char* f : {"job.frd", "job.cvg", "job.12d", "spooles.out"}) fs::remove(work / f);
-      {  // the answer against the range each region's law was calibrated over
-        const auto materials = region_materials(case_.registry);
-        for (auto& [region, st] : sim.result.principal_stretch)
-          if (const auto it = materials.find(region); it != materials.end()) {
-            st.calibrated_max = it->second.stretch_max;
-            if (st.p99 > st.calibrated_max)
-              spdlog::warn("simulate: {}: {} is stretched to {:.3g} (99th percentile of its elements; largest {:.3g}), "
-                           "beyond the {:.3g} its law was calibrated to: there the answer is the fitted solid's "
-                           "extrapolation; lower the pressure or give tissue data that reach that far",
-                           o.name, region, st.p99, st.max, st.calibrated_max);
-          }
-      }
-      if (case_.stages.simulate.band) sim.result.band = simulate_band(o.name, work, so);
-      if (sim.result.indentation) thesis_indentation_curve(info, *sim.result.indentation);
-      write_simulation_files(sim.input, sim.frd, sim.result, staged.simulation_dir());
-      try {  // the picture is a review aid: without a display the numbers still stand
-        draw_simulation(sim, staged.simulation(o.name, "png"), case_.stages.snapshot.width_px,
-                        case_.stages.snapshot.height_px);
-        if (sim.result.indentation)
-          draw_indentation_plot(sim, sim.result.indentation->thesis_curve, sim.result.indentation->thesis_source,
-                                staged.indentation_plot(o.name), case_.stages.snapshot.width_px,
-                                case_.stages.snapshot.height_px);
-      } catch (const DisplayError& e) {
-        spdlog::warn("simulate: {}: no picture ({})", o.name, e.message());
-      }
-      const auto& r = sim.result;
-      spdlog::info("simulate: {}: converged in {} increments, {:.1f} s; largest displacement {:.3g} mm, von Mises "
-                   "{:.3g} Pa; reaction balance {:.2g} %",
-                   o.name, r.increments, r.solver_seconds, r.max_displacement_mm, r.max_von_mises_Pa,
-                   100 * r.balance_error);
-      if (r.indentation) {
-        const auto& ind = *r.indentation;
-        spdlog::info("simulate: {}: {:.3g} mm probe pressed to {:.3g} mm ({}): {:.3g} mN; {:.3g} mN/mm at 1 mm",
-                     o.name, ind.probe.diameter_mm, ind.range_depth_mm,
-                     ind.range_region.empty() ? "the step's depth" : ind.range_region + " at the top of its range",
-                     1e3 * ind.curve.back()[1], 1e3 * ind.stiffness_N_per_mm_at_1mm);
-      }
-      if (r.pressure_range)
-        spdlog::warn("simulate: {}: the pressure of {:.3g} kPa takes {} past its calibrated range from {:.3g} kPa on; "
-                     "above that the answer is the fitted solid's extrapolation",
-                     o.name, r.pressure_kPa, r.pressure_range->region, r.pressure_range->in_range_pressure_kPa);
-      ++ran;
-    }
-    if (ran == 0) spdlog::warn("simulate: no organ with a load case (gallbladder or trachea) in this case");
-  }
-
-  /// The thesis' own reading of the indentation test (§5.1.5, Figure 5.1.6): the organ's law
-  /// (its body region's, thesis Table 5.1.2) as a uniaxial nominal stress at strain depth /
-  /// organ thickness, the mean of its two directions, times the probe's area.
-  static void thesis_indentation_curve(const OrganInfo& info, IndentationResult& ind) {
-    const auto it = info.materials.find(info.name + "_body");
-    if (it == info.materials.end() || !(ind.probe.thickness_mm > 0)) return;
-    const physics::RegionLaw law = region_law(it->second);
-    const auto model = physics::make_model(law.material.model, law.options);
-    const std::vector<double> p = physics::parameter_values(*model, law.material.parameters);
-    const double area_m2 = M_PI * 0.25 * ind.probe.diameter_mm * ind.probe.diameter_mm * 1e-6;
-    for (const auto& [depth, force] : ind.curve) {
-      const double l = 1.0 + depth / ind.probe.thickness_mm;
-      const double T = 0.5 * (model->respond_one({l, 1.0, physics::LoadCase::uniaxial_circumferential}, p) +
-                              model->respond_one({l, 1.0, physics::LoadCase::uniaxial_longitudinal}, p));
-      ind.thesis_curve.push_back({depth, std::isfinite(T) ? T * area_m2 : 0.0});
-    }
-    ind.thesis_source = law.id + " at strain depth / " + format_g(ind.probe.thickness_mm, 3) + " mm, times the probe's area";
-  }
-
-  /// The material band's variants of one organ (meshes/<organ>/band/), each run like the organ's
-  /// own INP in `work`/band_<variant>/. A variant that does not converge is recorded with the
-  /// solver's words and a warning; it does not fail the stage (the organ's own result stands).
-  nlohmann::json simulate_band(const std::string& organ, const fs::path& work, const SimulateOptions& so) {
-    std::map<std::string, SimulationResult> variants;
-    for (const char* v : {"p05", "p50", "p95"}) {
-      const fs::path inp = layout_.band_input(organ, v);
-      if (!fs::exists(inp))
-        throw InputError(ExitCode::input_not_found, organ + ": no material band to simulate", inp,
-                         "write one with [stages.mesh] material_band = true (or `organsmith mesh DIR --material-band`)");
-      const fs::path dir = work / (std::string("band_") + v);
-      try {
-        Simulation sim = simulate_inp(inp, dir, so, progress_);
-        variants[v] = sim.result;
-        spdlog::info("simulate: {} band {}: largest displacement {:.3g} mm, lumen change {:.4g} ml", organ, v,
-                     sim.result.max_displacement_mm, sim.result.lumen_volume_change_mm3 / 1000);
-      } catch (const SimulationError& e) {
-        if (e.code() != ExitCode::solver_failed) throw;
-        SimulationResult failed;
-        failed.organ = organ;
-        failed.solver_message = e.message();
-        variants[v] = failed;
-        spdlog::warn("simulate: {} band {}: {}", organ, v, e.message());
-      }
-      for (const char* f : {"job.frd", "job.cvg", "job.12d", "spooles.out"}) fs::remove(dir / f);
-    }
-    return band_summary(variants);
+    SimulateStageInputs in;
+    in.out_dir = out_;
+    in.registry = &case_.registry;
+    for (const auto& o : case_.organs) in.organs.push_back(o.name);
+    in.picture_width_px = case_.stages.snapshot.width_px;
+    in.picture_height_px = case_.stages.snapshot.height_px;
+    simulate_stage(in, case_.stages.simulate, staging, progress_);
   }
 
   /// The segmentation: this run's, else read from labels.nii.gz (its reader).
@@ -467,39 +325,18 @@ class Runner {
       spdlog::info("guide: paths/{}", f);
   }
 
-  /// snapshot renders the review PNGs of everything the earlier stages left in the output.
+  /// snapshot: the review pictures from this run's model where it is in memory (review/snapshot_stage.h).
   void write_snapshots(const fs::path& staging) {
-    LoadFlags flags;
-    flags.ct = input_.string();
-    flags.registry = &case_.registry;
-    flags.case_name = case_.name;
-    for (const auto& o : case_.organs) flags.organs.push_back(o.name);
-    if (model_.ct) flags.ct_volume = &*model_.ct;  // this run's, in memory (else read again)
-    if (model_.labels) flags.label_map = &*model_.labels;
-    if (model_.meshes && !case_.stages.mesh.ras) flags.meshes = &*model_.meshes;
-    OutputScene os;
-    load_output_scene(out_, flags, os, progress_);
-    for (const auto& m : os.missing) spdlog::info("snapshot: not found: {}", m);
-    fs::create_directories(OutputLayout{staging}.snapshots_dir());
-    SnapshotOptions so;
-    so.width_px = case_.stages.snapshot.width_px;
-    so.height_px = case_.stages.snapshot.height_px;
-    so.views.clear();
-    for (const auto& v : case_.stages.snapshot.views) so.views.push_back(parse_view_kind(v));
-    const auto written = render_snapshots(os.scene, so, OutputLayout{staging}.snapshots_dir(), progress_);
-    spdlog::info("snapshot: {} views", written.size());
-    for (const auto& organ : case_.stages.snapshot.indent) {
-      // The organ under the simulate stage's probe, through organsmith's FE model of its solver file.
-      IndentOptions io;
-      io.fe.quadratic = true;
-      io.realtime_press = false;
-      io.picture_png = OutputLayout{staging}.snapshots_dir() / ("indent_" + organ + ".png");
-      io.picture_width_px = so.width_px;
-      io.picture_height_px = so.height_px;
-      const nlohmann::json r = haptics_indent(out_, organ, io, progress_);
-      spdlog::info("snapshot: indent_{}.png ({} mN at {} mm)", organ, 1e3 * r["curve"].back()[1].get<double>(),
-                   r["curve"].back()[0].get<double>());
-    }
+    SnapshotStageInputs in;
+    in.out_dir = out_;
+    in.ct_path = input_;
+    in.registry = &case_.registry;
+    in.case_name = case_.name;
+    for (const auto& o : case_.organs) in.organs.push_back(o.name);
+    if (model_.ct) in.ct = &*model_.ct;
+    if (model_.labels) in.labels = &*model_.labels;
+    if (model_.meshes && !case_.stages.mesh.ras) in.meshes = &*model_.meshes;  // the files are in RAS then
+    snapshot_stage(in, case_.stages.snapshot, staging, progress_);
   }
 
   /// The calibrated material of each organ region (physics presets, thesis tables), as written
