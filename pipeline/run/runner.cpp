@@ -14,6 +14,7 @@
 #include "pipeline/stages/guide_stage.h"
 #include "pipeline/stages/mesh_stage.h"
 #include "pipeline/stages/simulate_stage.h"
+#include "pipeline/stages/segment_stage.h"
 #include "pipeline/review/snapshot_stage.h"
 #include "pipeline/io/ingest.h"
 #include "pipeline/phantom/phantom.h"
@@ -367,61 +368,25 @@ class Runner {
     return {};
   }
 
-  /// segment writes labels.nii.gz (input grid), contours_<organ>.json and overlays/*.png: the
-  /// organs with a segmentation preset found by the GVF snakes, the others taken from their label
-  /// maps.
+  /// segment: labels.nii.gz, contours and overlays (stages/segment_stage.h), from the organs'
+  /// seeds as the ingest stage resolved them.
   void write_segmentation(const fs::path& staging) {
-    std::vector<OrganRequest> requests;
-    for (const OrganSeed& seed : organ_seeds()) {
-      OrganRequest r;
-      r.organ = seed.organ;
-      const OrganSpec* spec = case_organ(r.organ);
-      if (spec && !spec->label_map.empty()) continue;
-      r.seed_lps_mm = seed.lps_mm;
-      // An organ found automatically ignores a phantom seed (a hint for reviewers only).
-      if (!case_.registry.at(r.organ).needs_seed && !case_has_seed(r.organ)) r.seed_lps_mm.reset();
-      requests.push_back(std::move(r));
+    SegmentStageInputs in;
+    in.ct = &volume();
+    const std::vector<OrganSeed>& seeds = organ_seeds();
+    for (const OrganSpec& spec : case_.organs) {
+      SegmentStageOrgan o;
+      o.name = spec.name;
+      for (const OrganSeed& s : seeds)
+        if (s.organ == spec.name) o.seed_lps_mm = s.lps_mm;
+      o.seed_from_case = spec.seed_lps_mm.has_value() || spec.seed_ijk.has_value();
+      if (!spec.label_map.empty()) o.label_map = spec.label_map == "phantom" ? layout_.phantom_truth() : fs::path(spec.label_map);
+      in.organs.push_back(std::move(o));
     }
-    SegmentOptions options;
-    options.preset_overrides_toml = case_.segment_presets_toml;
-    options.registry_toml = case_.registry_toml;
-    SegmentationResult result = segment_organs(volume(), requests, options, progress_);
-    for (const auto& spec : case_.organs) {
-      if (spec.label_map.empty()) continue;
-      const fs::path file = spec.label_map == "phantom" ? layout_.phantom_truth() : spec.label_map;
-      const OrganInfo& info = case_.registry.at(spec.name);
-      const double ml = merge_organ_from_label_map(result.labels, read_label_map(file), info.label);
-      if (ml <= 0)
-        throw InputError(ExitCode::organ_not_found,
-                         "organ " + spec.name + " (label " + std::to_string(info.label) + ") is absent from its label map",
-                         file, "check the label map and the organ's label in the organ registry");
-      spdlog::info("segment: {} {:.1f} ml from the label map {}", spec.name, ml, file.filename().string());
-    }
-    const OutputLayout staged{staging};
-    write_label_map(result.labels, staged.labels());
-    // Later stages get the grid the file holds (single precision), as a resumed run reads it.
-    result.labels.grid = read_image_grid(staged.labels());
-    for (const auto& organ : result.organs) {
-      write_file_atomic(staged.contours(organ.organ), contours_json(organ));
-      spdlog::info("segment: {} {:.1f} ml on slices {}–{}", organ.organ, organ.volume_ml, organ.first_slice,
-                   organ.last_slice);
-      for (const auto& note : organ.notes) spdlog::info("segment: {}: {}", organ.organ, note);
-    }
-    fs::create_directories(staged.overlays_dir());
-    write_overlays(volume(), result, staged.overlays_dir());
-    model_.labels = std::move(result.labels);
-  }
-
-  const OrganSpec* case_organ(const std::string& name) const {
-    for (const auto& o : case_.organs)
-      if (o.name == name) return &o;
-    return nullptr;
-  }
-
-  bool case_has_seed(const std::string& organ) const {
-    for (const auto& o : case_.organs)
-      if (o.name == organ) return o.seed_lps_mm.has_value() || o.seed_ijk.has_value();
-    return false;
+    in.registry = &case_.registry;
+    in.preset_overrides_toml = case_.segment_presets_toml;
+    in.registry_toml = case_.registry_toml;
+    model_.labels = segment_stage(in, staging, progress_);
   }
 
   /// Ingest writes ingest.json: what was read, its geometry and digest, and the organ seeds
@@ -481,8 +446,6 @@ class Runner {
     return *model_.seeds;
   }
 
-  /// The case's own organ registry, when it has one (empty otherwise: the embedded registry is
-  /// part of the tool version).
   // The organ registry and presets in force: the case's, else the embedded ones (a build with
   // other embedded presets must not reuse a segmentation made with the old ones).
   std::string registry_digest() const {
