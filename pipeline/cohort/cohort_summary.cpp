@@ -1,6 +1,7 @@
 #include "pipeline/cohort/cohort_summary.h"
 
 #include "core/csv.h"
+#include "pipeline/output/json_file.h"
 #include "core/errors.h"
 #include "core/file_io.h"
 #include "core/format.h"
@@ -21,16 +22,6 @@ namespace fs = std::filesystem;
 namespace organsmith {
 
 namespace {
-
-nlohmann::json read_json_or_null(const fs::path& p) {
-  const auto text = read_file(p);
-  if (!text) return nullptr;
-  try {
-    return nlohmann::json::parse(*text);
-  } catch (const nlohmann::json::exception&) {
-    return nullptr;
-  }
-}
 
 /// Dice of the study's label `label` against the reference's nonzero voxels. The reference may
 /// lie on another grid (axis order, flips): each study voxel looks up the reference voxel at its

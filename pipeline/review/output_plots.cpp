@@ -9,6 +9,7 @@
 #include "core/format.h"
 #include "physics/materials/presets.h"
 #include "physics/materials/uncertainty.h"
+#include "pipeline/output/json_file.h"
 #include "pipeline/output/output_layout.h"
 #include "pipeline/review/output_scene.h"
 
@@ -23,17 +24,6 @@
 namespace organsmith {
 
 namespace fs = std::filesystem;
-
-nlohmann::json read_json_or_null(const fs::path& p) {
-  std::ifstream in(p);
-  if (!in) return nullptr;
-  try {
-    return nlohmann::json::parse(in);
-  } catch (const std::exception&) {
-    spdlog::warn("{} is not valid JSON; ignored", p.string());
-    return nullptr;
-  }
-}
 
 namespace {
 

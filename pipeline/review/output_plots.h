@@ -13,9 +13,6 @@
 
 namespace organsmith {
 
-/// The JSON of `p`, or null when it is absent or not JSON (a warning says so).
-nlohmann::json read_json_or_null(const std::filesystem::path& p);
-
 /// `organsmith calibrate` output in `dir` (params.json + fit.csv): measured points against the
 /// fitted model, per specimen and load case. Nothing when the files are absent or not as
 /// `calibrate` writes them. `stem` names the plot (plot_fit_<stem>.png).

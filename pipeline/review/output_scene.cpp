@@ -7,6 +7,7 @@
 #include "pipeline/io/image_io.h"
 #include "pipeline/io/ingest.h"
 #include "pipeline/case/organ_registry.h"
+#include "pipeline/output/json_file.h"
 #include "pipeline/output/output_layout.h"
 #include "pipeline/output/read_manifest.h"
 #include "pipeline/review/output_plots.h"
