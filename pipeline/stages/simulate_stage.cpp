@@ -148,12 +148,10 @@ void simulate_stage(const SimulateStageInputs& in, const SimulateStageOptions& o
     if (sim.result.indentation) thesis_indentation_curve(info, *sim.result.indentation);
     write_simulation_files(sim.input, sim.frd, sim.result, staged.simulation_dir());
     try {  // the picture is a review aid: without a display the numbers still stand
-      draw_simulation(sim, staged.simulation(name, "png"), in.picture_width_px,
-                      in.picture_height_px);
+      draw_simulation(sim, staged.simulation(name, "png"), in.picture_width_px, in.picture_height_px);
       if (sim.result.indentation)
         draw_indentation_plot(sim, sim.result.indentation->thesis_curve, sim.result.indentation->thesis_source,
-                              staged.indentation_plot(name), in.picture_width_px,
-                              in.picture_height_px);
+                              staged.indentation_plot(name), in.picture_width_px, in.picture_height_px);
     } catch (const DisplayError& e) {
       spdlog::warn("simulate: {}: no picture ({})", name, e.message());
     }
@@ -175,7 +173,7 @@ void simulate_stage(const SimulateStageInputs& in, const SimulateStageOptions& o
                    name, r.pressure_kPa, r.pressure_range->region, r.pressure_range->in_range_pressure_kPa);
     ++ran;
   }
-  if (ran == 0) spdlog::warn("simulate: no organ with a load case (gallbladder or trachea) in this case");
+  if (ran == 0) spdlog::warn("simulate: no organ in this case has a wall and a load step in its solver file");
 }
 
 }  // namespace organsmith
