@@ -250,6 +250,7 @@ void RealtimeTissue::publish(ToolContact c) {
     else eq_.response.resize(0, 0);
     eq_.grip_offset = grip_offset_;
     eq_.held = held_;
+    eq_.grip_normal = grip_normal_;
     eq_.grip = gripping_ ? model_.held_nodes() : std::vector<std::int32_t>{};
   }
   contact_.write(c);
@@ -272,13 +273,20 @@ void RealtimeTissue::update_display() {
   double gap = 0.0;
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
-    u = eq_.u;
-    grip = eq_.grip;
-    if (eq_.response.cols() == 3 && eq_.response.rows() == u.size() && tool.allFinite() && tool.norm() < 1e20 &&
-        tool_force_N(tool).norm() > 0) {
-      const Eigen::Vector3d delta = tool + eq_.grip_offset - eq_.held;
-      u.noalias() += eq_.response * delta;
-      gap = delta.norm();
+    const bool tool_here = tool.allFinite() && tool.norm() < 1e20;
+    if (!eq_.grip.empty() && (!tool_here || (tool + eq_.grip_offset).dot(eq_.grip_normal) >= 0.0)) {
+      // The tool is back at the surface's rest position (or gone): without its load the organ's
+      // equilibrium is the rest state exactly (solve_once lets go too, once an equilibrium still
+      // in progress notices; on a 10-node tube that can take seconds).
+      u = Eigen::VectorXd::Zero(eq_.u.size());
+    } else {
+      u = eq_.u;
+      grip = eq_.grip;
+      if (eq_.response.cols() == 3 && eq_.response.rows() == u.size() && tool_here && tool_force_N(tool).norm() > 0) {
+        const Eigen::Vector3d delta = tool + eq_.grip_offset - eq_.held;
+        u.noalias() += eq_.response * delta;
+        gap = delta.norm();
+      }
     }
   }
   std::lock_guard<std::mutex> lock(display_mutex_);

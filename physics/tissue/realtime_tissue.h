@@ -129,6 +129,7 @@ class RealtimeTissue {
     Eigen::MatrixXd response;  ///< empty out of contact
     Eigen::Vector3d grip_offset = Eigen::Vector3d::Zero();  ///< held displacement = tool + this, where the tissue follows
     Eigen::Vector3d held = Eigen::Vector3d::Zero();         ///< the held displacement solved for
+    Eigen::Vector3d grip_normal = Eigen::Vector3d::Zero();  ///< the grip's outward normal (gripping)
     std::vector<std::int32_t> grip;
   };
   mutable std::mutex state_mutex_;
