@@ -121,6 +121,16 @@ RealtimeTissue::Touch RealtimeTissue::touch(const Eigen::Vector3d& tool) const {
   return t;
 }
 
+namespace {
+
+/// The tool is gone, or back at or outside the surface's rest position along the grip's normal:
+/// without its load the organ's equilibrium is the rest state.
+bool withdrawn_to_rest(const Eigen::Vector3d& tool, const Eigen::Vector3d& grip_offset, const Eigen::Vector3d& normal) {
+  return !(tool.allFinite() && tool.norm() < 1e20) || (tool + grip_offset).dot(normal) >= 0.0;
+}
+
+}  // namespace
+
 void RealtimeTissue::set_tool(const Eigen::Vector3d& p) noexcept { tool_.write({p.x(), p.y(), p.z()}); }
 
 Eigen::Vector3d RealtimeTissue::tool_force_N(const Eigen::Vector3d& x) const noexcept {
@@ -173,8 +183,7 @@ bool RealtimeTissue::solve_once() {
   // the tool gets there.
   auto withdrawn = [this] {
     const auto p = tool_.read();
-    const Eigen::Vector3d x(p[0], p[1], p[2]);
-    return !(x.allFinite() && x.norm() < 1e20) || (x + grip_offset_).dot(grip_normal_) >= 0.0;
+    return withdrawn_to_rest(Eigen::Vector3d(p[0], p[1], p[2]), grip_offset_, grip_normal_);
   };
   if (gripping_ && withdrawn()) {
     let_go();
@@ -273,8 +282,7 @@ void RealtimeTissue::update_display() {
   double gap = 0.0;
   {
     std::lock_guard<std::mutex> lock(state_mutex_);
-    const bool tool_here = tool.allFinite() && tool.norm() < 1e20;
-    if (!eq_.grip.empty() && (!tool_here || (tool + eq_.grip_offset).dot(eq_.grip_normal) >= 0.0)) {
+    if (!eq_.grip.empty() && withdrawn_to_rest(tool, eq_.grip_offset, eq_.grip_normal)) {
       // The tool is back at the surface's rest position (or gone): without its load the organ's
       // equilibrium is the rest state exactly (solve_once lets go too, once an equilibrium still
       // in progress notices; on a 10-node tube that can take seconds).
@@ -282,7 +290,8 @@ void RealtimeTissue::update_display() {
     } else {
       u = eq_.u;
       grip = eq_.grip;
-      if (eq_.response.cols() == 3 && eq_.response.rows() == u.size() && tool_here && tool_force_N(tool).norm() > 0) {
+      if (eq_.response.cols() == 3 && eq_.response.rows() == u.size() && tool.allFinite() && tool.norm() < 1e20 &&
+          tool_force_N(tool).norm() > 0) {
         const Eigen::Vector3d delta = tool + eq_.grip_offset - eq_.held;
         u.noalias() += eq_.response * delta;
         gap = delta.norm();

@@ -1,3 +1,9 @@
+// The organ's finite-element model from its solver file, and the two things done with it: the
+// real-time press (`haptics --indent`: the probe pressed through the real-time threads and what
+// the force loop gave the tool) and its comparison with CalculiX's curve. Over 400 lines because
+// the press and its report share the model, the probe's nodes and the curve readers; the figures
+// it writes are the ones TISSUE.md and issue 38's tables quote.
+
 #include "pipeline/stages/organ_fe.h"
 
 #include "core/errors.h"

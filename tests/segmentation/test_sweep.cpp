@@ -29,6 +29,7 @@
 #include <cstdio>
 #include <algorithm>
 #include <functional>
+#include <sstream>
 
 using namespace organsmith;
 using namespace organsmith::testing;
@@ -618,13 +619,11 @@ void mesh_edge_variants(const Scan& base, const std::string& organ, bool seeded,
       std::printf("  short of the volume gate (held): %s at a %.1f mm edge, |volume error| %.2f %% (reached %.2f %%)\n",
                   organ.c_str(), edge_mm, 100 * r.volume_error_max, 100 * held->volume_error_reached);
       EXPECT_LE(r.volume_error_max, held->volume_error_reached + 0.002) << "surface edge " << edge_mm << " mm";
-      // Only the volume gate is short.
-      std::string others = r.failures;
-      for (std::size_t at; (at = others.find("volume")) != std::string::npos;) {
-        const std::size_t start = others.rfind("; ", at) == std::string::npos ? 0 : others.rfind("; ", at) + 2;
-        others.erase(start, others.find("; ", at) + 2 - start);
-      }
-      EXPECT_TRUE(others.empty()) << "surface edge " << edge_mm << " mm: " << others;
+      // Only the volume gate is short: every failure ("…; " each) is a volume one.
+      std::istringstream failures(r.failures);
+      for (std::string f; std::getline(failures, f, ';');)
+        if (f.find_first_not_of(' ') != std::string::npos)
+          EXPECT_NE(f.find("volume"), std::string::npos) << "surface edge " << edge_mm << " mm: " << f;
       continue;
     }
     EXPECT_TRUE(r.failures.empty()) << "surface edge " << edge_mm << " mm: " << r.failures;
