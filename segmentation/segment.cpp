@@ -1279,4 +1279,27 @@ std::string contours_json(const OrganSegmentation& organ) {
   return j.dump(1) + "\n";
 }
 
+std::optional<ContourStack> contours_from_json(const std::string& text, const std::string& organ, std::string* why) {
+  const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+  if (!j.is_object() || !j.contains("contours") || !j["contours"].is_array()) {
+    if (why) *why = "not a JSON object with a \"contours\" array";
+    return std::nullopt;
+  }
+  ContourStack stack;
+  stack.organ = j.value("organ", organ);
+  try {
+    for (const auto& c : j["contours"]) {
+      Contour contour;
+      contour.slice_k = c.value("slice_k", std::int64_t(0));
+      contour.closed = c.value("closed", true);
+      for (const auto& q : c.at("points_lps_mm")) contour.points_lps_mm.emplace_back(q.at(0), q.at(1), q.at(2));
+      stack.contours.push_back(std::move(contour));
+    }
+  } catch (const std::exception& e) {
+    if (why) *why = std::string("contours not in the expected form: ") + e.what();
+    return std::nullopt;
+  }
+  return stack;
+}
+
 }  // namespace organsmith

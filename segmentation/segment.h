@@ -74,6 +74,10 @@ SegmentationResult segment_organs(const Volume& volume, const std::vector<OrganR
 /// The contour stack as JSON text: {"organ", "frame": "LPS", "unit": "mm", "contours":
 /// [{"slice_k", "points_lps_mm": [[x, y, z], …]}]}.
 std::string contours_json(const OrganSegmentation& organ);
+/// The reader of that text (contours_<organ>.json): the stack as the text holds it; nothing when
+/// the text is not JSON or not in that form (`why`, when given, then says what is wrong).
+std::optional<ContourStack> contours_from_json(const std::string& text, const std::string& organ,
+                                               std::string* why = nullptr);
 
 struct OverlayOptions {
   double window_lo_hu = -200;   ///< grey-level window of the slices, HU (default −200)

@@ -469,8 +469,12 @@ IncisionPath trachea_incision_path(const Centerline& cl, const SurfaceIndex& wal
 // ---- files ---------------------------------------------------------------------------------------
 
 Polyline read_path_file(const fs::path& path) {
-  const std::string text = read_input_file(path, "the path file", ExitCode::unsupported_input,
-                                           "a path is a CSV with columns x,y,z (LPS mm) or JSON {\"points_lps_mm\": [[x, y, z], …]}");
+  return read_path_text(read_input_file(path, "the path file", ExitCode::unsupported_input,
+                                        "a path is a CSV with columns x,y,z (LPS mm) or JSON {\"points_lps_mm\": [[x, y, z], …]}"),
+                        path);
+}
+
+Polyline read_path_text(const std::string& text, const fs::path& path) {
   Polyline out;
   out.name = path.stem().string();
   const auto bad = [&](const std::string& what, const std::string& hint = {}) {

@@ -98,6 +98,9 @@ IncisionPath trachea_incision_path(const Centerline& centerline, const SurfaceIn
 /// writes, or a bare array of triples). Throws InputError (exit code 3 when missing, 18 when
 /// malformed: file and line named; fewer than 2 points; a non-finite coordinate).
 Polyline read_path_file(const std::filesystem::path& path);
+/// The same reader on a path's text; `path` names it in errors and gives the name when the text
+/// has none (its stem).
+Polyline read_path_text(const std::string& text, const std::filesystem::path& path);
 
 /// Throws InputError (exit code 18) naming `source` when a point of `path` lies outside the
 /// image's field of view by more than `tolerance_mm` (a path far outside the body).

@@ -122,7 +122,7 @@ int run_guide(const GuideFlags& f) {
     } else {
       const std::optional<CaseFile> run = case_of_run(out);
       const GuideFiles files = read_guide_inputs(out, run && run->stages.mesh.ras);
-      written = write_guidance_paths(files.inputs(), paths, options, run ? run->registry : registry_of_output(out));
+      written = write_guidance_paths(files.inputs(), paths, options, run ? run->registry : registry_of_output(out)).files;
     }
   });
   for (const auto& w : written) std::cout << "wrote " << (dest / w).string() << "\n";

@@ -177,10 +177,9 @@ std::optional<Plot> monte_carlo_plot(const fs::path& dir, const std::string& ste
 /// The laws of the organ regions in materials.json (the attach stage), uniaxial, with the
 /// 5–95 % band of a Monte Carlo over the preset's standard deviations where the thesis gives
 /// them; and the CDFs of that Monte Carlo at a few stretches.
-std::vector<Plot> material_plots(const fs::path& out, const OrganRegistry& registry) {
+std::vector<Plot> material_plots(const MaterialsFile& materials, const OrganRegistry& registry) {
   std::vector<Plot> plots;
-  const nlohmann::json mj = read_json_or_null(OutputLayout{out}.materials());
-  if (!mj.is_object() || !mj.contains("regions") || !mj["regions"].is_object()) return plots;
+  if (materials.regions.empty() && materials.malformed.empty()) return plots;
   const physics::MaterialLibrary lib = physics::builtin_material_library();
   Plot laws;
   laws.name = "materials";
@@ -199,14 +198,9 @@ std::vector<Plot> material_plots(const fs::path& out, const OrganRegistry& regis
   auto positive = [](double v) { return std::isfinite(v) && v > 0; };
   // Regions with identical laws share one curve.
   std::vector<std::pair<std::vector<std::string>, OutputRegionLaw>> distinct;
-  for (const auto& [region, _] : mj["regions"].items()) {
-    OutputRegionLaw law;
-    try {
-      law = output_region_law(out, region, registry);
-    } catch (const Error& e) {
-      spdlog::warn("{}", e.what());
-      continue;
-    }
+  for (const auto& [region, why] : materials.malformed)
+    spdlog::warn("{}: region {} of materials.json is malformed: {}", materials.source.string(), region, why);
+  for (const auto& [region, law] : materials.regions) {
     bool merged = false;
     for (auto& [names, l] : distinct)
       if (l.material.model == law.material.model && l.material.parameters.size() == law.material.parameters.size() &&

@@ -2,6 +2,7 @@
 // Plots made from what a run (or `calibrate`, `uncertainty`) left in a directory, for snapshots.
 
 #include "pipeline/case/organ_registry.h"
+#include "pipeline/review/output_scene.h"
 #include "viewer/scene.h"
 
 #include <nlohmann/json.hpp>
@@ -22,9 +23,9 @@ std::optional<Plot> calibration_fit_plot(const std::filesystem::path& dir, const
 /// at each stretch.
 std::optional<Plot> monte_carlo_plot(const std::filesystem::path& dir, const std::string& stem);
 
-/// The laws of the organ regions in OUT/materials.json (uniaxial, with the 5–95 % band of a Monte
+/// The laws of the organ regions of materials.json (uniaxial, with the 5–95 % band of a Monte
 /// Carlo over the preset's standard deviations where the thesis gives them) and the CDFs of that
 /// Monte Carlo at a few stretches.
-std::vector<Plot> material_plots(const std::filesystem::path& out, const OrganRegistry& registry);
+std::vector<Plot> material_plots(const MaterialsFile& materials, const OrganRegistry& registry);
 
 }  // namespace organsmith

@@ -1,6 +1,7 @@
 #include "pipeline/review/output_scene.h"
 
 #include "core/errors.h"
+#include "core/file_io.h"
 #include "physics/haptics/paths.h"
 #include "physics/materials/presets.h"
 #include "physics/materials/uncertainty.h"
@@ -11,6 +12,7 @@
 #include "pipeline/output/output_layout.h"
 #include "pipeline/output/read_manifest.h"
 #include "pipeline/review/output_plots.h"
+#include "segmentation/segment.h"
 #include "viewer/label_surface.h"
 #include "viewer/mesh_files.h"
 #include "viewer/snapshot.h"
@@ -33,25 +35,14 @@ namespace fs = std::filesystem;
 namespace {
 
 
-/// Contours written by the segmentation stage (contours_<organ>.json). Read leniently: the file
-/// is {"organ": …, "contours": [{"slice_k": k, "points_lps_mm": [[x, y, z], …], "closed": b}]}.
+/// Contours written by the segmentation stage (contours_<organ>.json), through their reader;
+/// read leniently: a file not in that form is not drawn.
 std::optional<ContourStack> read_contours(const fs::path& p, const std::string& organ) {
-  const nlohmann::json j = read_json_or_null(p);
-  if (!j.is_object() || !j.contains("contours") || !j["contours"].is_array()) return std::nullopt;
-  ContourStack stack;
-  stack.organ = j.value("organ", organ);
-  try {
-    for (const auto& c : j["contours"]) {
-      Contour contour;
-      contour.slice_k = c.value("slice_k", std::int64_t(0));
-      contour.closed = c.value("closed", true);
-      for (const auto& q : c.at("points_lps_mm")) contour.points_lps_mm.emplace_back(q.at(0), q.at(1), q.at(2));
-      stack.contours.push_back(std::move(contour));
-    }
-  } catch (const std::exception&) {
-    spdlog::warn("{}: contours not in the expected form; not drawn", p.string());
-    return std::nullopt;
-  }
+  const std::optional<std::string> text = read_file(p);
+  if (!text) return std::nullopt;
+  std::string why;
+  std::optional<ContourStack> stack = contours_from_json(*text, organ, &why);
+  if (!stack && why.find("expected form") != std::string::npos) spdlog::warn("{}: {}; not drawn", p.string(), why);
   return stack;
 }
 
@@ -66,47 +57,71 @@ Rgb path_colour(const std::string& name) {
 
 }  // namespace
 
-OutputRegionLaw output_region_law(const fs::path& out, const std::string& region, const OrganRegistry& registry) {
-  OutputRegionLaw law;
-  const fs::path mf = OutputLayout{out}.materials();
-  if (fs::exists(mf)) {
-    std::ifstream in(mf);
-    nlohmann::json j;
+MaterialsFile materials_from_text(const std::string& text, const fs::path& source) {
+  MaterialsFile m;
+  m.source = source;
+  nlohmann::json j;
+  try {
+    j = nlohmann::json::parse(text);
+  } catch (const nlohmann::json::exception& e) {
+    throw InputError(ExitCode::unsupported_input, std::string("materials.json is not valid JSON: ") + e.what(), source,
+                     "rerun the attach stage (`organsmith run --force`)");
+  }
+  if (!j.is_object() || !j.contains("regions") || !j["regions"].is_object()) return m;
+  for (const auto& [region, r] : j["regions"].items()) {
+    OutputRegionLaw law;
     try {
-      j = nlohmann::json::parse(in);
+      law.material.model = r.at("model").get<std::string>();
+      for (const auto& p : r.at("parameters"))
+        law.material.parameters.push_back({p.at("name").get<std::string>(), p.at("value").get<double>(), p.value("unit", "")});
+      if (r.contains("constants") && r["constants"].contains("bulk_modulus_Pa"))
+        law.options.bulk_modulus_Pa = r["constants"]["bulk_modulus_Pa"].get<double>();
+      law.preset_id = r.value("preset", std::string());
+      law.material.source = r.value("source", std::string());
     } catch (const nlohmann::json::exception& e) {
-      throw InputError(ExitCode::unsupported_input, std::string("materials.json is not valid JSON: ") + e.what(), mf,
-                       "rerun the attach stage (`organsmith run --force`)");
+      m.malformed[region] = e.what();
+      continue;
     }
-    if (j.contains("regions") && j["regions"].is_object() && j["regions"].contains(region)) {
-      const auto& r = j["regions"][region];
-      try {
-        law.material.model = r.at("model").get<std::string>();
-        for (const auto& p : r.at("parameters"))
-          law.material.parameters.push_back({p.at("name").get<std::string>(), p.at("value").get<double>(), p.value("unit", "")});
-        if (r.contains("constants") && r["constants"].contains("bulk_modulus_Pa"))
-          law.options.bulk_modulus_Pa = r["constants"]["bulk_modulus_Pa"].get<double>();
-        law.preset_id = r.value("preset", std::string());
-        law.material.source = r.value("source", std::string());
-      } catch (const nlohmann::json::exception& e) {
-        throw InputError(ExitCode::unsupported_input, "region " + region + " of materials.json is malformed: " + e.what(),
-                         mf, "rerun the attach stage (`organsmith run --force`)");
-      }
-      law.from_output = true;
-      return law;
-    }
+    law.from_output = true;
+    m.regions[region] = std::move(law);
+  }
+  return m;
+}
+
+std::optional<MaterialsFile> read_materials(const fs::path& out) {
+  const fs::path mf = OutputLayout{out}.materials();
+  if (!fs::exists(mf)) return std::nullopt;
+  const std::optional<std::string> text = read_file(mf);
+  if (!text)
+    throw InputError(ExitCode::input_not_found, "cannot read materials.json", mf, "check the file's permissions");
+  return materials_from_text(*text, mf);
+}
+
+OutputRegionLaw output_region_law(const MaterialsFile* materials, const std::string& region, const OrganRegistry& registry,
+                                  const fs::path& materials_path) {
+  if (materials) {
+    if (const auto it = materials->malformed.find(region); it != materials->malformed.end())
+      throw InputError(ExitCode::unsupported_input, "region " + region + " of materials.json is malformed: " + it->second,
+                       materials->source, "rerun the attach stage (`organsmith run --force`)");
+    if (const auto it = materials->regions.find(region); it != materials->regions.end()) return it->second;
   }
   std::string preset_id;
   for (const auto& o : registry.organs)
     if (const auto it = o.materials.find(region); it != o.materials.end()) preset_id = it->second;
   if (preset_id.empty())
-    throw InputError(ExitCode::unsupported_input, "no material for region " + region, mf,
+    throw InputError(ExitCode::unsupported_input, "no material for region " + region, materials_path,
                      "run the attach stage, or see `organsmith materials` for the regions");
   const physics::RegionLaw r = region_law(preset_id);
+  OutputRegionLaw law;
   law.material = r.material;
   law.options = r.options;
   law.preset_id = preset_id;
   return law;
+}
+
+OutputRegionLaw output_region_law(const fs::path& out, const std::string& region, const OrganRegistry& registry) {
+  const std::optional<MaterialsFile> m = read_materials(out);
+  return output_region_law(m ? &*m : nullptr, region, registry, OutputLayout{out}.materials());
 }
 
 void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene& os, Progress& progress) {
@@ -155,7 +170,7 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
   fs::path labels = flags.labels;
   std::string source = "label map " + fs::path(flags.labels).filename().string();
   if (labels.empty() && (flags.label_map || fs::exists(layout.labels()))) labels = layout.labels(), source = "segmentation";
-  if (labels.empty() && fs::exists(layout.phantom_truth())) {
+  if (labels.empty() && (flags.phantom_truth || fs::exists(layout.phantom_truth()))) {
     labels = layout.phantom_truth();
     source = "phantom ground truth";
     os.missing.push_back("the segmentation (labels.nii.gz): outlines show the phantom's ground truth instead");
@@ -164,6 +179,8 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
     const LabelMap* lm = nullptr;
     if (flags.label_map && flags.labels.empty()) {
       lm = flags.label_map;
+    } else if (flags.phantom_truth && labels == layout.phantom_truth()) {
+      lm = flags.phantom_truth;
     } else {
       os.labels = read_label_map(labels);
       lm = &*os.labels;
@@ -179,9 +196,14 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
   }
 
   // Contours of the segmentation stage.
-  for (const auto& o : scene.organs)
-    if (const auto p = layout.contours(o.name); fs::exists(p))
+  for (const auto& o : scene.organs) {
+    if (flags.contours) {
+      for (const ContourStack& c : *flags.contours)
+        if (c.organ == o.name) scene.contours.push_back(c);
+    } else if (const auto p = layout.contours(o.name); fs::exists(p)) {
       if (auto stack = read_contours(p, o.name)) scene.contours.push_back(std::move(*stack));
+    }
+  }
 
   // Meshes of the mesh stage: meshes/<organ>/<surface>.vtp and meshes/<organ>/<organ>.vtu, by the
   // surfaces the registry says the organ's model has; drawn in path order, as every run does.
@@ -285,9 +307,14 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
     std::optional<LabelMap> truth;
     const bool labels_have_context =
         std::any_of(context.begin(), context.end(), [&](const OrganInfo* o) { return scene.labels->count(o->label) > 0; });
-    if (flags.context_step_vox > 0 && !labels_have_context && fs::exists(layout.phantom_truth())) {
+    bool from_truth = false;
+    if (flags.context_step_vox > 0 && !labels_have_context && flags.phantom_truth) {
+      context_labels = flags.phantom_truth;
+      from_truth = true;
+    } else if (flags.context_step_vox > 0 && !labels_have_context && fs::exists(layout.phantom_truth())) {
       truth = read_label_map(layout.phantom_truth());
       context_labels = &*truth;
+      from_truth = true;
     }
     for (const OrganInfo* o : context) {
       if (flags.context_step_vox <= 0) break;
@@ -300,34 +327,51 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
       LabelSurfaceOptions lo;
       lo.step_vox = flags.context_step_vox;
       s.mesh = label_surface(*context_labels, o->label, lo);
-      s.source = truth ? "context from phantom ground truth" : "";
+      s.source = from_truth ? "context from phantom ground truth" : "";
       if (!s.mesh.triangles.empty()) scene.surfaces.push_back(std::move(s));
     }
   }
   if (scene.tet_meshes.empty()) os.missing.push_back("tetrahedral meshes (.vtu): no tets_ views");
 
-  // Guidance paths of the guide stage (OUT/paths/<name>.json), in name order.
-  std::vector<fs::path> path_files;
-  for (auto it = fs::directory_iterator(layout.paths_dir(), ec); !ec && it != fs::directory_iterator(); ++it)
-    if (it->is_regular_file() && it->path().extension() == ".json") path_files.push_back(it->path());
-  ec.clear();
-  std::sort(path_files.begin(), path_files.end());
-  for (const auto& f : path_files) {
-    try {
-      ScenePath p;
-      p.line = physics::read_path_file(f);
-      p.line.name = f.stem().string();
-      p.colour = path_colour(p.line.name);
-      scene.paths.push_back(std::move(p));
-    } catch (const Error& e) {
-      spdlog::warn("{}", e.what());
+  // Guidance paths of the guide stage (OUT/paths/<name>.json), in file-name order.
+  if (flags.paths) {
+    std::vector<const Polyline*> sorted;
+    for (const Polyline& p : *flags.paths) sorted.push_back(&p);
+    std::stable_sort(sorted.begin(), sorted.end(),
+                     [](const Polyline* a, const Polyline* b) { return a->name + ".json" < b->name + ".json"; });
+    for (const Polyline* line : sorted) scene.paths.push_back({*line, path_colour(line->name)});
+  } else {
+    std::vector<fs::path> path_files;
+    for (auto it = fs::directory_iterator(layout.paths_dir(), ec); !ec && it != fs::directory_iterator(); ++it)
+      if (it->is_regular_file() && it->path().extension() == ".json") path_files.push_back(it->path());
+    ec.clear();
+    std::sort(path_files.begin(), path_files.end());
+    for (const auto& f : path_files) {
+      try {
+        ScenePath p;
+        p.line = physics::read_path_file(f);
+        p.line.name = f.stem().string();
+        p.colour = path_colour(p.line.name);
+        scene.paths.push_back(std::move(p));
+      } catch (const Error& e) {
+        spdlog::warn("{}", e.what());
+      }
     }
   }
   if (scene.paths.empty()) os.missing.push_back("guidance paths (paths/*.json, the guide stage): the overview has none");
 
   // Plots: the materials of the attach stage; calibrate / uncertainty results under OUT or named.
   if (flags.plots) {
-    for (auto& p : material_plots(out, registry)) scene.plots.push_back(std::move(p));
+    std::optional<MaterialsFile> read;
+    if (!flags.materials) {
+      try {
+        read = read_materials(out);
+      } catch (const Error& e) {
+        spdlog::warn("{}", e.what());
+      }
+    }
+    if (const MaterialsFile* m = flags.materials ? flags.materials : read ? &*read : nullptr)
+      for (auto& p : material_plots(*m, registry)) scene.plots.push_back(std::move(p));
     std::vector<fs::path> dirs;
     for (const auto& d : flags.calibration_dirs) {
       if (!fs::is_directory(d, ec))

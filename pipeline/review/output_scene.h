@@ -12,6 +12,7 @@
 #include "viewer/scene.h"
 
 #include <filesystem>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -31,6 +32,33 @@ struct OutputScene {
   OutputScene& operator=(const OutputScene&) = delete;
 };
 
+/// The calibrated law of an organ region ("gallbladder_body", "trachea_wall", …): from
+/// OUT/materials.json (the attach stage) when it has the region, else the built-in preset the
+/// region is assigned to. Throws InputError when materials.json is malformed or no law exists.
+struct OutputRegionLaw {
+  Material material;
+  physics::ModelOptions options;
+  std::string preset_id;     ///< the preset it came from (as materials.json records it)
+  bool from_output = false;  ///< true: read from OUT/materials.json
+};
+OutputRegionLaw output_region_law(const std::filesystem::path& out, const std::string& region, const OrganRegistry& registry);
+
+/// materials.json (the attach stage) as its one reader gives it: each region's law, or what is
+/// wrong with the region's entry.
+struct MaterialsFile {
+  std::filesystem::path source;                       ///< the file (named in errors)
+  std::map<std::string, OutputRegionLaw> regions;     ///< by region name
+  std::map<std::string, std::string> malformed;       ///< region → what is wrong with its entry
+};
+/// Reads materials.json's text (`source` names it); throws InputError when the text is not JSON.
+MaterialsFile materials_from_text(const std::string& text, const std::filesystem::path& source);
+/// OUT/materials.json through that reader: nothing when the file is absent.
+std::optional<MaterialsFile> read_materials(const std::filesystem::path& out);
+/// The law of `region`: from `materials` when it has the region (InputError when its entry is
+/// malformed), else the built-in preset the registry assigns (InputError when there is none).
+OutputRegionLaw output_region_law(const MaterialsFile* materials, const std::string& region, const OrganRegistry& registry,
+                                  const std::filesystem::path& materials_path);
+
 /// Where to find the CT and labels when not in the usual places, and how much context to draw.
 struct LoadFlags {
   std::string ct, labels;
@@ -48,21 +76,14 @@ struct LoadFlags {
   const Volume* ct_volume = nullptr;
   const LabelMap* label_map = nullptr;
   const OrganMeshes* meshes = nullptr;  ///< the mesh stage's result, LPS mm
+  const LabelMap* phantom_truth = nullptr;              ///< the phantom stage's ground truth
+  const std::vector<ContourStack>* contours = nullptr;  ///< the segment stage's, as its files hold them
+  const std::vector<Polyline>* paths = nullptr;         ///< the guide stage's, as its files hold them
+  const MaterialsFile* materials = nullptr;             ///< the attach stage's materials.json
   /// The running case's name and organs (empty = as the directory's manifest records them).
   std::string case_name;
   std::vector<std::string> organs;
 };
-
-/// The calibrated law of an organ region ("gallbladder_body", "trachea_wall", …): from
-/// OUT/materials.json (the attach stage) when it has the region, else the built-in preset the
-/// region is assigned to. Throws InputError when materials.json is malformed or no law exists.
-struct OutputRegionLaw {
-  Material material;
-  physics::ModelOptions options;
-  std::string preset_id;     ///< the preset it came from (as materials.json records it)
-  bool from_output = false;  ///< true: read from OUT/materials.json
-};
-OutputRegionLaw output_region_law(const std::filesystem::path& out, const std::string& region, const OrganRegistry& registry);
 
 /// Fills `os` from the output directory `out`; what is missing is listed in os.missing.
 void load_output_scene(const std::filesystem::path& out, const LoadFlags& flags, OutputScene& os,

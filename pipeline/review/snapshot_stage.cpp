@@ -21,6 +21,10 @@ void snapshot_stage(const SnapshotStageInputs& in, const SnapshotStageOptions& o
   flags.ct_volume = in.ct;
   flags.label_map = in.labels;
   flags.meshes = in.meshes;
+  flags.phantom_truth = in.phantom_truth;
+  flags.contours = in.contours;
+  flags.paths = in.paths;
+  flags.materials = in.materials;
   OutputScene os;
   load_output_scene(in.out_dir, flags, os, progress);
   for (const auto& m : os.missing) spdlog::info("snapshot: not found: {}", m);

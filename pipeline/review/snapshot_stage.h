@@ -8,6 +8,7 @@
 #include "meshing/mesh.h"
 #include "pipeline/case/organ_registry.h"
 #include "pipeline/case/stage_options.h"
+#include "pipeline/review/output_scene.h"
 
 #include <filesystem>
 #include <string>
@@ -25,6 +26,10 @@ struct SnapshotStageInputs {
   const Volume* ct = nullptr;
   const LabelMap* labels = nullptr;
   const OrganMeshes* meshes = nullptr;      ///< LPS mm (null when the files are in RAS)
+  const LabelMap* phantom_truth = nullptr;
+  const std::vector<ContourStack>* contours = nullptr;
+  const std::vector<Polyline>* paths = nullptr;
+  const MaterialsFile* materials = nullptr;
 };
 
 /// Renders `options.views` into `staging`/snapshots/ and presses `options.indent`'s organs.

@@ -153,7 +153,8 @@ class Runner {
                                              .command = "run"}),
         out_(out_dir_.path()),
         layout_{out_},
-        previous_(out_dir_.previous_manifest()) {}
+        previous_(out_dir_.previous_manifest()),
+        materials_json_(materials_json(c)) {}
 
   RunSummary run() {
     try {
@@ -195,10 +196,14 @@ class Runner {
     if (case_.synthesize_phantom) {
       const nlohmann::json opts = to_json(case_)["phantom"];
       execute({"phantom", fingerprint("phantom", opts.dump()), [&](const fs::path& staging) {
-                 const Phantom ph = synthesize_phantom(case_.phantom, progress_);
+                 Phantom ph = synthesize_phantom(case_.phantom, progress_);
                  const OutputLayout staged{staging};
                  fs::create_directories(staged.phantom_dir());
                  write_phantom_files(ph, case_.phantom, staged.phantom_dir(), progress_);
+                 // Later stages take the truth and seeds from here, as their files hold them.
+                 ph.truth.grid = read_image_grid(staged.phantom_truth());
+                 model_.phantom_truth = std::move(ph.truth);
+                 model_.phantom_seeds = std::move(ph.seeds_lps_mm);
                }});
       input = layout_.phantom_dicom();
     }
@@ -233,13 +238,15 @@ class Runner {
       // The probe's place and depth are simulate options written into the mesh stage's INP.
       const nlohmann::json probe_opts = {{"probe_lps_mm", case_.stages.simulate.probe_lps_mm},
                                          {"probe_depth_mm", case_.stages.simulate.probe_depth_mm}};
-      execute({"mesh", fingerprint("mesh", mesh_opts.dump() + registry_digest() + materials_json().dump() +
+      execute({"mesh", fingerprint("mesh", mesh_opts.dump() + registry_digest() + materials_json_.dump() +
                                                bed_opts.dump() + probe_opts.dump() + outputs_digest("ingest") +
                                                outputs_digest("segment")),
                [&](const fs::path& staging) { write_meshes(staging); }});
-      execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json().dump()),
+      execute({"attach", fingerprint("attach", to_json(case_)["organs"].dump() + materials_json_.dump()),
                [&](const fs::path& staging) {
-                 write_file_atomic(OutputLayout{staging}.materials(), materials_json().dump(2) + "\n");
+                 const std::string text = materials_json_.dump(2) + "\n";
+                 write_file_atomic(OutputLayout{staging}.materials(), text);
+                 model_.materials = materials_from_text(text, layout_.materials());
                }});
       // guide: guidance paths (trachea centreline and incision, gallbladder dissection) in paths/.
       // The CT (ingest) gives the gallbladder's liver bed where no liver label does.
@@ -272,11 +279,7 @@ class Runner {
       in.band_organs.push_back(o.name);
     }
     in.registry = &case_.registry;
-    std::optional<LabelMap> truth;
-    in.truth = [&]() -> const LabelMap* {
-      if (!truth && fs::exists(layout_.phantom_truth())) truth.emplace(read_label_map(layout_.phantom_truth()));
-      return truth ? &*truth : nullptr;
-    };
+    in.truth = [this]() { return phantom_truth(); };
     in.ct = [this]() -> const Volume* { return &volume(); };
     in.guide = case_.stages.guide;
     in.probe_lps_mm = case_.stages.simulate.probe_lps_mm;
@@ -305,7 +308,6 @@ class Runner {
   /// files of the stages it reuses.
   void write_paths(const fs::path& staging) {
     std::optional<GuideFiles> files;
-    std::optional<LabelMap> truth;
     GuideInputs in;
     if (model_.labels && model_.meshes) {
       in.labels = &*model_.labels;
@@ -317,14 +319,15 @@ class Runner {
         throw InputError(ExitCode::input_not_found, "the mesh stage made no surface " + name, layout_.organ_dir(organ),
                          "check the mesh stage's warnings");
       };
-      if (fs::exists(layout_.phantom_truth())) in.truth = &truth.emplace(read_label_map(layout_.phantom_truth()));
+      in.truth = phantom_truth();
     } else {
       files = read_guide_inputs(out_, case_.stages.mesh.ras);
       in = files->inputs();
     }
     in.ct = [this]() -> const Volume* { return &volume(); };
-    for (const auto& f : write_guidance_paths(in, OutputLayout{staging}.paths_dir(), case_.stages.guide, case_.registry))
-      spdlog::info("guide: paths/{}", f);
+    GuidePaths made = write_guidance_paths(in, OutputLayout{staging}.paths_dir(), case_.stages.guide, case_.registry);
+    for (const auto& f : made.files) spdlog::info("guide: paths/{}", f);
+    model_.paths = std::move(made.paths);
   }
 
   /// snapshot: the review pictures from this run's model where it is in memory (review/snapshot_stage.h).
@@ -338,15 +341,25 @@ class Runner {
     if (model_.ct) in.ct = &*model_.ct;
     if (model_.labels) in.labels = &*model_.labels;
     if (model_.meshes && !case_.stages.mesh.ras) in.meshes = &*model_.meshes;  // the files are in RAS then
+    if (model_.phantom_truth) in.phantom_truth = &*model_.phantom_truth;
+    if (model_.contours) in.contours = &*model_.contours;
+    if (model_.paths) in.paths = &*model_.paths;
+    if (model_.materials) in.materials = &*model_.materials;
     snapshot_stage(in, case_.stages.snapshot, staging, progress_);
   }
 
   /// The calibrated material of each organ region (physics presets, thesis tables), as written
   /// to materials.json and into the solver files.
-  nlohmann::json materials_json() const {
+  static nlohmann::json materials_json(const CaseFile& c) {
     std::vector<std::string> organs;
-    for (const auto& o : case_.organs) organs.push_back(o.name);
-    return materials_json_for(case_.registry, organs, case_.stages.mesh.material_band);
+    for (const auto& o : c.organs) organs.push_back(o.name);
+    return materials_json_for(c.registry, organs, c.stages.mesh.material_band);
+  }
+
+  /// The phantom's ground truth: this run's, else read from its file (null when there is none).
+  const LabelMap* phantom_truth() {
+    if (!model_.phantom_truth && fs::exists(layout_.phantom_truth())) model_.phantom_truth = read_label_map(layout_.phantom_truth());
+    return model_.phantom_truth ? &*model_.phantom_truth : nullptr;
   }
 
   /// The ingested volume: kept from the ingest stage, or read again when that stage was reused.
@@ -387,7 +400,9 @@ class Runner {
     in.registry = &case_.registry;
     in.preset_overrides_toml = case_.segment_presets_toml;
     in.registry_toml = case_.registry_toml;
-    model_.labels = segment_stage(in, staging, progress_);
+    SegmentStageResult r = segment_stage(in, staging, progress_);
+    model_.labels = std::move(r.labels);
+    model_.contours = std::move(r.contours);
   }
 
   /// Ingest writes ingest.json: what was read, its geometry and digest, and the organ seeds
@@ -421,7 +436,7 @@ class Runner {
   /// Each organ's seed in LPS mm (case file, else the phantom's seeds.json) and where it came from.
   std::vector<OrganSeed> resolve_seeds(const ImageGrid& grid) {
     std::map<std::string, Eigen::Vector3d> phantom_seeds;
-    if (case_.synthesize_phantom) phantom_seeds = read_seeds(layout_.phantom_seeds());
+    if (case_.synthesize_phantom) phantom_seeds = model_.phantom_seeds ? *model_.phantom_seeds : read_seeds(layout_.phantom_seeds());
     std::vector<OrganSeed> seeds;
     for (const auto& o : case_.organs) {
       OrganSeed s{o.name, std::nullopt, {}};
@@ -529,7 +544,7 @@ class Runner {
     m["case"] = to_json(case_);
     m["input"] = input_json_;
     m["coordinates"] = "LPS millimetres (DICOM patient coordinates)";
-    if (!case_.organs.empty()) m["materials"] = materials_json()["regions"];
+    if (!case_.organs.empty()) m["materials"] = materials_json_["regions"];
     return m;
   }
 
@@ -540,6 +555,7 @@ class Runner {
   fs::path out_;
   OutputLayout layout_;  // paths in the output directory (and, with root = staging, in a stage's staging folder)
   nlohmann::json previous_;
+  nlohmann::json materials_json_;  // the regions' calibrated laws (materials.json, the mesh stage's fingerprint)
   std::vector<StageRecord> records_;
   std::string input_digest_;
   fs::path input_;

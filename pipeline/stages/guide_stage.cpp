@@ -89,8 +89,8 @@ LiverBedForSolver liver_bed_for_solver(const SurfaceMesh& gb, const GuideInputs&
   return out;
 }
 
-std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::path& dest_dir,
-                                              const GuideStageOptions& options, const OrganRegistry& registry) {
+GuidePaths write_guidance_paths(const GuideInputs& in, const fs::path& dest_dir, const GuideStageOptions& options,
+                                const OrganRegistry& registry) {
   for (const auto& n : options.only)
     if (std::find(builtin_path_names().begin(), builtin_path_names().end(), n) == builtin_path_names().end())
       throw UsageError("unknown path '" + n + "'", "paths: trachea_centerline, trachea_incision, gallbladder_dissection");
@@ -100,13 +100,17 @@ std::vector<std::string> write_guidance_paths(const GuideInputs& in, const fs::p
     return labels.count(label) > 0;
   };
   fs::create_directories(dest_dir);
-  std::vector<std::string> written;
+  GuidePaths written;
   auto emit = [&](const Polyline& line, const std::vector<std::pair<std::string, double>>& props,
                   const std::vector<std::pair<std::string, std::string>>& notes = {}) {
-    write_file_atomic(dest_dir / (line.name + ".json"), physics::path_json(line, props, notes));
+    const fs::path json = dest_dir / (line.name + ".json");
+    const std::string text = physics::path_json(line, props, notes);
+    write_file_atomic(json, text);
     write_file_atomic(dest_dir / (line.name + ".vtp"), physics::path_vtp(line));
-    written.push_back(line.name + ".json");
-    written.push_back(line.name + ".vtp");
+    written.files.push_back(line.name + ".json");
+    written.files.push_back(line.name + ".vtp");
+    // The path as its file holds it (4 decimals), through the file's reader.
+    written.paths.push_back(physics::read_path_text(text, json));
   };
   // The paths belong to two organs of the registry; an organ a registry lacks has no paths.
   const OrganInfo* trachea = registry.find("trachea");

@@ -52,7 +52,8 @@ struct GuideFiles {
 GuideFiles read_guide_inputs(const std::filesystem::path& out_dir, bool ras = false);
 
 /// Makes the built-in paths `options` asks for (all whose organ the label map holds by default),
-/// writes <name>.json and <name>.vtp per path into `dest_dir` (created) and returns the file names.
+/// writes <name>.json and <name>.vtp per path into `dest_dir` (created) and returns the file names
+/// and the paths.
 /// The trachea's and the liver's labels and the organs' surface names come from `registry`.
 /// The gallbladder's liver bed as the solver model's fixed set takes it, by the same rule as the
 /// dissection path (`physics::liver_bed_score`: the liver label of the label map or of the
@@ -66,7 +67,11 @@ struct LiverBedForSolver {
 LiverBedForSolver liver_bed_for_solver(const SurfaceMesh& gallbladder_surface, const GuideInputs& inputs,
                                        const GuideStageOptions& options, const OrganRegistry& registry);
 
-std::vector<std::string> write_guidance_paths(const GuideInputs& inputs, const std::filesystem::path& dest_dir,
-                                              const GuideStageOptions& options, const OrganRegistry& registry);
+struct GuidePaths {
+  std::vector<std::string> files;  ///< file names written, in order
+  std::vector<Polyline> paths;     ///< each path as its <name>.json holds it (its reader's result)
+};
+GuidePaths write_guidance_paths(const GuideInputs& inputs, const std::filesystem::path& dest_dir,
+                                const GuideStageOptions& options, const OrganRegistry& registry);
 
 }  // namespace organsmith

@@ -12,7 +12,7 @@ namespace organsmith {
 
 namespace fs = std::filesystem;
 
-LabelMap segment_stage(const SegmentStageInputs& in, const fs::path& staging, Progress& progress) {
+SegmentStageResult segment_stage(const SegmentStageInputs& in, const fs::path& staging, Progress& progress) {
   std::vector<OrganRequest> requests;
   for (const SegmentStageOrgan& o : in.organs) {
     if (!o.label_map.empty()) continue;
@@ -41,15 +41,19 @@ LabelMap segment_stage(const SegmentStageInputs& in, const fs::path& staging, Pr
   write_label_map(result.labels, staged.labels());
   // Later stages get the grid the file holds (single precision), as a resumed run reads it.
   result.labels.grid = read_image_grid(staged.labels());
+  SegmentStageResult out;
   for (const auto& organ : result.organs) {
-    write_file_atomic(staged.contours(organ.organ), contours_json(organ));
+    const std::string text = contours_json(organ);
+    write_file_atomic(staged.contours(organ.organ), text);
+    if (auto stack = contours_from_json(text, organ.organ)) out.contours.push_back(std::move(*stack));
     spdlog::info("segment: {} {:.1f} ml on slices {}–{}", organ.organ, organ.volume_ml, organ.first_slice,
                  organ.last_slice);
     for (const auto& note : organ.notes) spdlog::info("segment: {}: {}", organ.organ, note);
   }
   fs::create_directories(staged.overlays_dir());
   write_overlays(*in.ct, result, staged.overlays_dir());
-  return std::move(result.labels);
+  out.labels = std::move(result.labels);
+  return out;
 }
 
 }  // namespace organsmith

@@ -4,6 +4,7 @@
 // overlays/*.png. Run by `organsmith run` and `organsmith segment` (through the runner).
 
 #include "core/progress.h"
+#include "core/geometry.h"
 #include "core/volume.h"
 #include "pipeline/case/organ_registry.h"
 
@@ -33,8 +34,15 @@ struct SegmentStageInputs {
   std::string registry_toml;                ///< the case's registry file's text ("" = embedded)
 };
 
-/// Segments into `staging` and returns the label map with the grid its file holds (single
-/// precision), as a resumed run reads it back. InputError (exit 50s) when an organ is absent.
-LabelMap segment_stage(const SegmentStageInputs& in, const std::filesystem::path& staging, Progress& progress);
+/// What the stage hands on, as its files hold it (a resumed run reads the same back): the label
+/// map with the grid of labels.nii.gz (single precision) and each segmented organ's contours as
+/// contours_<organ>.json holds them (0.1 µm).
+struct SegmentStageResult {
+  LabelMap labels;
+  std::vector<ContourStack> contours;
+};
+
+/// Segments into `staging`. InputError (exit 50s) when an organ is absent.
+SegmentStageResult segment_stage(const SegmentStageInputs& in, const std::filesystem::path& staging, Progress& progress);
 
 }  // namespace organsmith

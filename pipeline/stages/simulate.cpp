@@ -594,12 +594,17 @@ std::string stall_state(const SolverInput& in, const fs::path& frd, const std::m
 }  // namespace
 
 Simulation simulate_inp(const fs::path& inp, const fs::path& work_dir, const SimulateOptions& o, Progress& progress) {
+  return simulate_inp(inp, read_solver_inp(inp), work_dir, o, progress);
+}
+
+Simulation simulate_inp(const fs::path& inp, SolverInput input, const fs::path& work_dir, const SimulateOptions& o,
+                        Progress& progress) {
   const fs::path exe = find_on_path(o.solver);
   if (exe.empty())
     throw SimulationError(ExitCode::solver_not_found, "the finite-element solver '" + o.solver + "' is not on PATH", {},
                           "install CalculiX: apt-get install calculix-ccx (or scripts/install-deps)");
   Simulation sim;
-  sim.input = read_solver_inp(inp);
+  sim.input = std::move(input);
   SimulationResult& r = sim.result;
   r.organ = sim.input.model.organ;
   if (!has_load_case(sim.input))

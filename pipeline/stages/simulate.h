@@ -184,6 +184,9 @@ nlohmann::json band_summary(const std::map<std::string, SimulationResult>& varia
 /// stops without converging (with its message and the load fraction reached).
 Simulation simulate_inp(const std::filesystem::path& inp, const std::filesystem::path& work_dir,
                         const SimulateOptions& options, Progress& progress);
+/// The same with the INP already read (`input` = read_solver_inp(inp)): the file is parsed once.
+Simulation simulate_inp(const std::filesystem::path& inp, SolverInput input, const std::filesystem::path& work_dir,
+                        const SimulateOptions& options, Progress& progress);
 
 /// The figures of a result against its model (balance, displacement, stress, lumen volume).
 void evaluate_simulation(const SolverInput& in, const FrdResult& frd, SimulationResult& r);

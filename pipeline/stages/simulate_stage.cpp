@@ -106,14 +106,15 @@ void simulate_stage(const SimulateStageInputs& in, const SimulateStageOptions& o
       spdlog::warn("simulate: {} has no solver input ({}); add \"inp\" to [stages.mesh] formats", name, inp.string());
       continue;
     }
-    if (!has_load_case(read_solver_inp(inp))) {
+    SolverInput input = read_solver_inp(inp);
+    if (!has_load_case(input)) {
       spdlog::warn("simulate: {} has no load step in {} (its comments say why); skipped", name, inp.string());
       continue;
     }
     const fs::path work = staged.simulation_work(name);
     Simulation sim;
     try {
-      sim = simulate_inp(inp, work, so, progress);
+      sim = simulate_inp(inp, std::move(input), work, so, progress);
     } catch (const SimulationError& e) {
       // The staging folder goes with the failure: the solver's account is kept where the
       // message can point to it.
