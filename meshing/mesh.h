@@ -46,6 +46,9 @@ struct MeshOrganSpec {
   std::string load_case;
   double pressure_kPa = 0.0;       ///< lumen pressure of the pressure load case, kPa
   double probe_diameter_mm = 5.0;  ///< diameter of the indentation probe, mm
+  /// wall_body: the organ it lies against (organ registry `bed_organ`); its fixed surface is
+  /// <name>_<bed_organ>_bed (<name>_bed when "").
+  std::string bed_organ;
 };
 
 /// Options of `mesh_organs`.

@@ -111,13 +111,15 @@ Eigen::Vector3d SolverModel::face_area_out_mm2(const SolverFace& f) const {
   return -0.5 * (b - a).cross(c - a);  // the face's node order makes (b−a)×(c−a) point inward
 }
 
+std::string bed_surface_suffix(const MeshOrganSpec& spec) { return spec.bed_organ.empty() ? "bed" : spec.bed_organ + "_bed"; }
+
 SolverScenario default_scenario(const MeshOrganSpec& spec) {
   SolverScenario s;
   if (spec.load_case.empty()) return s;
   s.pressure_surface = "lumen";
   s.pressure_kPa = spec.pressure_kPa;
   if (spec.model == OrganModel::wall_body) {
-    s.fixed_surface = "liver_bed";
+    s.fixed_surface = bed_surface_suffix(spec);
     s.indentation = spec.load_case == "indentation";
     if (!s.indentation) s.inactive_regions = {spec.name + "_body"};
   } else if (spec.model == OrganModel::tube) {
@@ -375,32 +377,40 @@ SolverModel build_solver_model(const OrganMesh& organ, const SolverModelOptions&
           m.notes.push_back(n + ": no lumen (the wall has no inside); no load case");
         }
       }
+      // The bed: where the organ lies against its bed organ (the gallbladder's liver bed).
+      const std::string suffix = bed_surface_suffix(organ.spec);
+      std::string words = suffix;  // "liver_bed" → "liver bed"
+      std::replace(words.begin(), words.end(), '_', ' ');
+      const std::string bed_organ = organ.spec.bed_organ.empty() ? std::string("bed") : organ.spec.bed_organ;
+      const auto score_it = o.bed_score.find(n);
+      const auto source_it = o.bed_source.find(n);
+      const bool has_score = score_it != o.bed_score.end() && score_it->second;
       std::vector<SolverFace> bed;
       const Eigen::Vector3d dir = o.bed_direction_lps.normalized();
       const double c = std::cos(o.bed_angle_deg * M_PI / 180.0);
       bool by_score = false;
-      if (o.liver_bed_score) {
+      if (has_score) {
         for (const auto& f : boundary)
-          if (o.liver_bed_score(centroid(m, f)) >= 0.5) bed.push_back(f);
+          if (score_it->second(centroid(m, f)) >= 0.5) bed.push_back(f);
         by_score = !bed.empty();
       }
       if (!by_score)
         for (const auto& f : boundary)
           if (m.face_area_out_mm2(f).normalized().dot(dir) >= c) bed.push_back(f);
       if (bed.empty()) {
-        m.notes.push_back(n + ": no part of the surface faces the liver; no liver bed, no load case");
+        m.notes.push_back(n + ": no part of the surface faces the " + bed_organ + "; no " + words + ", no load case");
       } else {
-      m.surfaces[n + "_liver_bed"] = largest_component(bed);
-      m.notes.push_back(n + "_liver_bed: " +
-                        (by_score ? "the liver bed from the " + o.liver_bed_source
-                                  : o.liver_bed_score ? "surface facing superior-right (the liver bed given lies off the mesh)"
-                                                      : std::string("surface facing superior-right (the liver's side)")) +
-                        ", " + std::to_string(int(std::round(area(m.surfaces[n + "_liver_bed"])))) + " mm2");
+        m.surfaces[n + "_" + suffix] = largest_component(bed);
+        m.notes.push_back(n + "_" + suffix + ": " +
+                          (by_score ? "the " + words + " from the " + (source_it != o.bed_source.end() ? source_it->second : std::string())
+                           : has_score ? "surface facing superior-right (the " + words + " given lies off the mesh)"
+                                       : "surface facing superior-right (the " + bed_organ + "'s side)") +
+                          ", " + std::to_string(int(std::round(area(m.surfaces[n + "_" + suffix])))) + " mm2");
       }
     }
   }
-  if (organ.spec.model == OrganModel::wall_body && m.surfaces.count(n + "_liver_bed"))
-    add_indentation_probe(m, o.probe_lps_mm, organ.spec.probe_diameter_mm);
+  if (organ.spec.model == OrganModel::wall_body && m.surfaces.count(n + "_" + bed_surface_suffix(organ.spec)))
+    add_indentation_probe(m, o.probe_lps_mm, organ.spec.probe_diameter_mm, bed_surface_suffix(organ.spec));
   if (organ.spec.model == OrganModel::tube && o.probe_on_tube && m.surfaces.count(n + "_cuts") && m.surfaces.count(n + "_outer"))
     add_indentation_probe(m, o.probe_lps_mm, organ.spec.probe_diameter_mm, "cuts");
   for (const auto& [name, fs] : m.surfaces) {

@@ -11,10 +11,11 @@
 //
 // Surfaces (names prefixed by the organ):
 //   wall_body (gallbladder): <organ>_outer (the organ's boundary), <organ>_lumen (the wall's
-//     inner face, where wall meets body; faces of wall elements) and <organ>_liver_bed (the part of
-//     the outer surface in the liver bed: where `liver_bed_score` ≥ 0.5 when the pipeline gives
-//     one (liver label or CT), else whose outward normal lies within `bed_angle_deg` of
-//     `bed_direction_lps`; the largest connected patch).
+//     inner face, where wall meets body; faces of wall elements) and <organ>_<bed organ>_bed (the
+//     part of the outer surface against the registry's bed organ, the gallbladder's liver bed:
+//     where `bed_score` ≥ 0.5 when the pipeline gives one (bed organ label or CT), else whose
+//     outward normal lies within `bed_angle_deg` of `bed_direction_lps`; the largest connected
+//     patch).
 //   tube (trachea): <organ>_outer, <organ>_lumen, <organ>_cranial and <organ>_caudal (the flat
 //     cut faces at the top and bottom of the tube).
 //   solid: <organ>_outer.
@@ -71,12 +72,12 @@ struct SolverModelOptions {
   bool quadratic = true;
   Eigen::Vector3d bed_direction_lps{-0.3, 0.0, 1.0};
   double bed_angle_deg = 60.0;
-  /// The liver bed where the pipeline knows it (the guide stage's rule: the liver label, else the
-  /// CT): per point of the organ's surface (LPS mm), a score in [0, 1], the bed ≥ 0.5; and where
-  /// the bed came from, for the notes. Empty: the faces within `bed_angle_deg` of
-  /// `bed_direction_lps`.
-  std::function<double(const Eigen::Vector3d&)> liver_bed_score;
-  std::string liver_bed_source;
+  /// A wall_body organ's bed where the pipeline knows it (the guide stage's rule: the bed organ's
+  /// label, else the CT), by organ name: per point of the organ's surface (LPS mm), a score in
+  /// [0, 1], the bed ≥ 0.5; and where the bed came from, for the notes. None: the faces within
+  /// `bed_angle_deg` of `bed_direction_lps`.
+  std::map<std::string, std::function<double(const Eigen::Vector3d&)>> bed_score;
+  std::map<std::string, std::string> bed_source;
   /// wall_body: where the indentation probe touches (snapped to the free outer surface); empty =
   /// the centre of the free surface opposite the liver bed. Its diameter comes from the spec.
   std::optional<Eigen::Vector3d> probe_lps_mm;
@@ -123,10 +124,13 @@ SolverScenario default_scenario(const MeshOrganSpec& spec);
 
 /// Places the indentation probe on a model whose surfaces are built (called by
 /// build_solver_model): adds the surface <organ>_probe and sets `m.probe`; a note says where.
-/// `fixed` names the held surface's suffix: "liver_bed" (wall_body: by default the centre of the
-/// free surface opposite the bed) or "cuts" (tube: by default the most anterior point of the outer
-/// wall halfway between the cuts, pressed posteriorly along its inward normal).
+/// `fixed` names the held surface's suffix: a bed, e.g. "liver_bed" (wall_body: by default the
+/// centre of the free surface opposite the bed) or "cuts" (tube: by default the most anterior point
+/// of the outer wall halfway between the cuts, pressed posteriorly along its inward normal).
 void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>& requested_lps_mm, double diameter_mm,
-                           const std::string& fixed = "liver_bed");
+                           const std::string& fixed);
+
+/// The suffix of a wall_body organ's bed surface: "<bed_organ>_bed" ("bed" without a bed organ).
+std::string bed_surface_suffix(const MeshOrganSpec& spec);
 
 }  // namespace organsmith

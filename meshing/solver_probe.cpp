@@ -1,4 +1,4 @@
-// The indentation probe of a solver model: a wall_body's opposite its liver bed, a tube's on its
+// The indentation probe of a solver model: a wall_body's opposite its bed (the liver bed), a tube's on its
 // anterior wall (see solver_model.h, SolverProbe).
 //
 // Why a bonded rigid disc and not contact: the thesis' stick is a flat rigid cylinder pressed
@@ -50,6 +50,8 @@ void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>&
                            const std::string& fixed) {
   const std::string n = m.organ;
   const bool tube = fixed == "cuts";
+  std::string bed_words = fixed;  // "liver_bed" → "liver bed"
+  std::replace(bed_words.begin(), bed_words.end(), '_', ' ');
   const auto& outer = m.surfaces.at(n + "_outer");
   const auto& bed = m.surfaces.at(n + "_" + fixed);
   std::set<std::pair<std::int32_t, std::int32_t>> in_bed;
@@ -64,7 +66,7 @@ void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>&
   for (const auto& f : outer)
     if (!in_bed.count({f.tet, f.face})) free.push_back(f);
   if (free.empty() || (!tube && bed_normal.norm() < 1e-12)) {
-    m.notes.push_back(n + ": no free surface beside the " + (tube ? "cut ends" : "liver bed") + "; no indentation probe");
+    m.notes.push_back(n + ": no free surface beside the " + (tube ? std::string("cut ends") : bed_words) + "; no indentation probe");
     return;
   }
   if (!tube) bed_normal.normalize();
@@ -141,7 +143,7 @@ void add_indentation_probe(SolverModel& m, const std::optional<Eigen::Vector3d>&
                     format_g(probe.point_lps_mm.z(), 5) + ") LPS mm, " +
                     (requested ? "the free surface nearest the point asked for (" + format_g(dmin, 3) + " mm from it)"
                      : tube    ? std::string("the front of the anterior wall halfway between the cuts")
-                               : std::string("the centre of the free surface opposite the liver bed")) +
+                               : "the centre of the free surface opposite the " + bed_words) +
                     ", " + format_g(probe.contact_area_mm2, 3) + " mm2; the organ is " + format_g(exit, 3) +
                     " mm thick along its inward normal");
   m.probe = probe;

@@ -342,6 +342,15 @@ CaseFile parse_case(const std::string& text, const fs::path& origin) {
             "[stages.snapshot] indent names '" + organ + "', whose load case is not the probe", origin,
             "an organ is pressed when its registry's load_case is \"indentation\" or [stages.mesh] indentation names it");
   }
+  const std::vector<std::string> path_names = c.registry.path_names();
+  for (const auto& path : c.stages.guide.only)
+    fail_if(std::find(path_names.begin(), path_names.end(), path) == path_names.end(),
+            "[stages.guide] paths names '" + path + "', which no organ of the registry has", origin,
+            "paths of the organ registry: " + [&] {
+              std::string k;
+              for (const auto& n : path_names) k += (k.empty() ? "" : ", ") + n;
+              return k;
+            }());
   if (const toml::table* presets = root["stages"]["segment"]["presets"].as_table()) {
     std::ostringstream ts;
     ts << toml::toml_formatter{*presets};

@@ -87,6 +87,13 @@ std::vector<std::string> OrganRegistry::modelled() const {
   return n;
 }
 
+std::vector<std::string> OrganRegistry::path_names() const {
+  std::vector<std::string> n;
+  for (const auto& o : organs)
+    for (const auto& kind : o.paths) n.push_back(o.name + "_" + kind);
+  return n;
+}
+
 const OrganInfo& OrganRegistry::at(std::string_view name, const fs::path& origin) const {
   if (const OrganInfo* o = find(name)) return *o;
   std::string known;
@@ -109,7 +116,8 @@ const std::vector<std::string> kKeys = {"label",          "needs_seed",     "mes
                                         "wall_mm",        "materials",      "haptic_surface",
                                         "haptic_region",  "haptic_max_strain", "colour",
                                         "opacity",        "segment",        "rings",
-                                        "load_case",      "pressure_kPa",   "probe_diameter_mm"};
+                                        "load_case",      "pressure_kPa",   "probe_diameter_mm",
+                                        "paths",          "bed_organ"};
 
 void parse_organ(const std::string& name, const toml::table& t, OrganInfo& o, const fs::path& origin) {
   auto fail = [&](const toml::node& n, const std::string& key, const std::string& what, const std::string& hint) {
@@ -186,6 +194,19 @@ void parse_organ(const std::string& name, const toml::table& t, OrganInfo& o, co
   };
   text("haptic_surface", o.haptic_surface);
   text("haptic_region", o.haptic_region);
+  text("bed_organ", o.bed_organ);
+  if (const toml::node* n = t.get("paths")) {
+    const toml::array* a = n->as_array();
+    if (!a) fail(*n, "paths", "must be an array of path kinds", "e.g. paths = [\"centerline\", \"incision\"]");
+    o.paths.clear();
+    for (const auto& item : *a) {
+      const auto x = item.value_exact<std::string>();
+      if (!x || (*x != "centerline" && *x != "incision" && *x != "dissection"))
+        fail(item, "paths", "holds " + (x ? "'" + *x + "'" : std::string("a non-string")) + ", not a path kind",
+             "kinds: \"centerline\", \"incision\" (a tube), \"dissection\" (a wall_body)");
+      if (std::find(o.paths.begin(), o.paths.end(), *x) == o.paths.end()) o.paths.push_back(*x);
+    }
+  }
   if (const toml::node* n = t.get("colour")) {
     const toml::array* a = n->as_array();
     bool ok = a && a->size() == 3;
@@ -254,6 +275,15 @@ void check_organ(const OrganInfo& o, const fs::path& origin) {
     fail("haptic_surface '" + o.haptic_surface + "' is not one of its surfaces", "surfaces: " + list(surfaces));
   if (!o.haptic_surface.empty() && !o.materials.count(o.haptic_region))
     fail("haptic_region '" + o.haptic_region + "' has no material", "give one of: " + list(regions));
+  for (const auto& kind : o.paths) {
+    const bool tube_path = kind == "centerline" || kind == "incision";
+    if (tube_path && o.mesh != OrganMeshModel::tube)
+      fail("paths has '" + kind + "', which only a tube has", "a " + kind + " follows an airway: mesh = \"tube\"");
+    if (!tube_path && o.mesh != OrganMeshModel::wall_body)
+      fail("paths has '" + kind + "', which only a wall_body has", "a dissection rims the bed of a mesh = \"wall_body\" organ");
+  }
+  if (!o.bed_organ.empty() && o.mesh != OrganMeshModel::wall_body)
+    fail("has a bed_organ, which only a wall_body takes", "remove bed_organ, or set mesh = \"wall_body\"");
 }
 
 }  // namespace
@@ -278,6 +308,13 @@ OrganRegistry parse_organ_registry(std::string_view text, const fs::path& origin
   std::set<int> labels;
   for (const auto& o : r.organs) {
     check_organ(o, origin);
+    if (!o.bed_organ.empty() && (!r.find(o.bed_organ) || o.bed_organ == o.name))
+      throw CaseFileError("organ registry: [" + o.name + "] bed_organ '" + o.bed_organ + "' is no other organ of the registry",
+                          origin, "organs of the registry: " + [&] {
+                            std::string k;
+                            for (const auto& n : r.names()) k += (k.empty() ? "" : ", ") + n;
+                            return k;
+                          }());
     if (!labels.insert(o.label).second)
       throw CaseFileError("organ registry: label " + std::to_string(o.label) + " is used by two organs (one is " +
                               o.name + ")",
@@ -312,6 +349,7 @@ MeshOrganSpec mesh_spec(const OrganInfo& organ, const std::map<std::string, doub
   s.load_case = organ.load_case;
   s.pressure_kPa = organ.pressure_kPa;
   s.probe_diameter_mm = organ.probe_diameter_mm;
+  s.bed_organ = organ.bed_organ;
   if (const auto it = wall_mm.find(organ.name); it != wall_mm.end()) s.wall_mm = it->second;
   return s;
 }

@@ -44,6 +44,12 @@ struct OrganInfo {
   double opacity = 1.0;              ///< display opacity of context organs (modelled organs: opaque body)
   bool segmented = false;            ///< has a segmentation preset: the segment stage finds it
   bool needs_seed = false;           ///< its segmentation starts from a seed inside it
+  /// Guidance paths the guide stage makes on it, by kind: "centerline" and "incision" (a tube),
+  /// "dissection" (a wall_body: the rim of its bed); each is written as <name>_<kind>.
+  std::vector<std::string> paths;
+  /// wall_body: the organ it lies against (its bed: the fixed set of its load case and the
+  /// dissection's side); "" = none (the bed then faces that organ's usual direction).
+  std::string bed_organ;
 
   /// Tet region names of the mesh model ({} for none).
   std::vector<std::string> regions() const;
@@ -63,6 +69,8 @@ struct OrganRegistry {
   std::vector<std::string> names() const;
   /// Names of the organs a case may model (mesh model other than none).
   std::vector<std::string> modelled() const;
+  /// Every guidance path the registry's organs have (<organ>_<kind>), in registry order.
+  std::vector<std::string> path_names() const;
 };
 
 /// The embedded data/organs.toml.

@@ -16,10 +16,6 @@
 
 namespace organsmith {
 
-const std::vector<std::string>& builtin_path_names() {
-  static const std::vector<std::string> names = {"trachea_centerline", "trachea_incision", "gallbladder_dissection"};
-  return names;
-}
 
 
 namespace fs = std::filesystem;
@@ -42,7 +38,9 @@ class Visitor {
                       const char* doc) = 0;
   /// A list of organ names (checked against the registry by the caller: the case's own registry
   /// is known only there).
-  virtual void organs(const char* key, std::vector<std::string>& v, const char* doc) = 0;
+  virtual void organs(const char* key, std::vector<std::string>& v, const char* doc) { names(key, v, "organ", doc); }
+  /// A list of names the organ registry defines (`what`: "organ", "path"; checked by the caller).
+  virtual void names(const char* key, std::vector<std::string>& v, const char* what, const char* doc) = 0;
   /// A table of organ name → number (organ names are checked against the registry by the caller).
   virtual void per_organ(const char* key, std::map<std::string, double>& v, double lo, double hi, const char* unit,
                          const char* doc) = 0;
@@ -91,7 +89,7 @@ void visit(Visitor& v, SimulateStageOptions& o) {
 }
 
 void visit(Visitor& v, GuideStageOptions& o) {
-  v.subset("paths", o.only, builtin_path_names(), "built-in paths to make; [] = every path whose organ is there");
+  v.names("paths", o.only, "path", "guidance paths to make (<organ>_<kind>); [] = every path whose organ is there");
   v.integer("first_ring", o.incision.first_ring, 1, 40, "incision: first ring from the cranial end");
   v.integer("ring_count", o.incision.ring_count, 1, 40, "incision: rings spanned");
   v.number("ring_pitch_mm", o.incision.ring_pitch_mm, 1.0, 30.0, "mm", "incision: cartilage ring period");
@@ -190,15 +188,16 @@ class Parser final : public Visitor {
     v = out;
   }
 
-  void organs(const char* key, std::vector<std::string>& v, const char*) override {
+  void names(const char* key, std::vector<std::string>& v, const char* what, const char*) override {
     const toml::node* n = take(key);
     if (!n) return;
     const toml::array* a = n->as_array();
-    if (!a) fail(*n, key, "must be an array of organ names", "e.g. " + std::string(key) + " = [\"trachea\"]");
+    const std::string example = std::string(what) == "path" ? "trachea_centerline" : "trachea";
+    if (!a) fail(*n, key, "must be an array of " + std::string(what) + " names", "e.g. " + std::string(key) + " = [\"" + example + "\"]");
     std::vector<std::string> out;
     for (const auto& item : *a) {
       const auto x = item.value_exact<std::string>();
-      if (!x) fail(item, key, "must hold organ names (strings) only", "e.g. " + std::string(key) + " = [\"trachea\"]");
+      if (!x) fail(item, key, "must hold " + std::string(what) + " names (strings) only", "e.g. " + std::string(key) + " = [\"" + example + "\"]");
       if (std::find(out.begin(), out.end(), *x) == out.end()) out.push_back(*x);
     }
     v = out;
@@ -271,7 +270,7 @@ class JsonWriter final : public Visitor {
   void subset(const char* key, std::vector<std::string>& v, const std::vector<std::string>&, const char*) override {
     j[key] = v;
   }
-  void organs(const char* key, std::vector<std::string>& v, const char*) override { j[key] = v; }
+  void names(const char* key, std::vector<std::string>& v, const char*, const char*) override { j[key] = v; }
   void per_organ(const char* key, std::map<std::string, double>& v, double, double, const char*, const char*) override {
     j[key] = v.empty() ? nlohmann::json::object() : nlohmann::json(v);
   }
@@ -299,10 +298,10 @@ class TomlWriter final : public Visitor {
     for (const auto& s : v) quoted.push_back("\"" + s + "\"");
     line(key, "[" + join(quoted) + "]", std::string(doc) + "; any of " + join(allowed));
   }
-  void organs(const char* key, std::vector<std::string>& v, const char* doc) override {
+  void names(const char* key, std::vector<std::string>& v, const char* what, const char* doc) override {
     std::vector<std::string> quoted;
     for (const auto& s : v) quoted.push_back("\"" + s + "\"");
-    line(key, "[" + join(quoted) + "]", std::string(doc) + "; names from the organ registry");
+    line(key, "[" + join(quoted) + "]", std::string(doc) + "; " + what + " names from the organ registry");
   }
   void per_organ(const char* key, std::map<std::string, double>& v, double lo, double hi, const char* unit,
                  const char* doc) override {

@@ -56,8 +56,11 @@ LabelMap run_labels(const fs::path& out) {
   return read_label_map(f);
 }
 
-bool is_builtin(const std::string& name) {
-  const auto& n = builtin_path_names();
+/// The guidance paths the organ registry of the run in `out` defines (<organ>_<kind>).
+std::vector<std::string> registry_paths(const fs::path& out) { return registry_of_output(out).path_names(); }
+
+bool is_registry_path(const fs::path& out, const std::string& name) {
+  const auto n = registry_paths(out);
   return std::find(n.begin(), n.end(), name) != n.end();
 }
 
@@ -75,14 +78,15 @@ int run_guide(const GuideFlags& f) {
   GuideStageOptions options = f.options;
   std::optional<Polyline> user;
   if (!f.path.empty()) {
-    if (is_builtin(f.path)) {
+    if (is_registry_path(out, f.path)) {
       options.only = {f.path};
     } else if (fs::is_regular_file(f.path)) {
       user = read_path_file(f.path);
       check_path_within(*user, run_labels(out).grid, f.path);
     } else {
-      throw UsageError("--path '" + f.path + "' is neither a path name nor a file",
-                       "names: trachea_centerline, trachea_incision, gallbladder_dissection; or a CSV/JSON file");
+      std::string names;
+      for (const auto& n : registry_paths(out)) names += (names.empty() ? "" : ", ") + n;
+      throw UsageError("--path '" + f.path + "' is neither a path name nor a file", "names: " + names + "; or a CSV/JSON file");
     }
   }
   // Every built-in path of a run: the run's guide stage itself, with the flags given here.
@@ -210,7 +214,7 @@ int run_haptics(HapticsFlags f) {
 
   // The path.
   Polyline path;
-  if (is_builtin(f.path)) {
+  if (is_registry_path(out, f.path)) {
     const fs::path pf = OutputLayout{out}.path(f.path, "json");
     if (!fs::exists(pf))
       throw InputError(ExitCode::input_not_found, "no guidance path " + f.path, pf,

@@ -48,12 +48,14 @@ GuideFiles read_guide_inputs(const fs::path& out_dir, bool ras) {
 
 namespace {
 
-/// The liver label map the bed is taken from (the label map's own, else the phantom's ground
-/// truth's), with the options' liver label set from the registry; null when neither holds one.
-const LabelMap* liver_labels(const GuideInputs& in, const OrganRegistry& registry, physics::DissectionOptions& dopt) {
-  const OrganInfo* liver_info = registry.find("liver");
-  if (!liver_info) return nullptr;
-  dopt.liver_label = liver_info->label;
+/// The label map the bed organ (the registry's `bed_organ` of `organ`) is taken from: the label
+/// map's own, else the phantom's ground truth's, with the options' bed label set from the
+/// registry; null when neither holds it or the organ has no bed organ.
+const LabelMap* bed_labels(const GuideInputs& in, const OrganRegistry& registry, const OrganInfo& organ,
+                           physics::DissectionOptions& dopt) {
+  const OrganInfo* bed_info = organ.bed_organ.empty() ? nullptr : registry.find(organ.bed_organ);
+  if (!bed_info) return nullptr;
+  dopt.liver_label = bed_info->label;
   // The phantom's ground truth is in the same patient frame (LPS mm); its grid may differ.
   if (in.labels && in.labels->count(dopt.liver_label) > 0) return in.labels;
   if (in.truth && in.truth->count(dopt.liver_label) > 0) return in.truth;
@@ -63,9 +65,9 @@ const LabelMap* liver_labels(const GuideInputs& in, const OrganRegistry& registr
 }  // namespace
 
 LiverBedForSolver liver_bed_for_solver(const SurfaceMesh& gb, const GuideInputs& in, const GuideStageOptions& options,
-                                       const OrganRegistry& registry) {
+                                       const OrganRegistry& registry, const OrganInfo& organ) {
   physics::DissectionOptions dopt = options.dissection;
-  const LabelMap* liver = liver_labels(in, registry, dopt);
+  const LabelMap* liver = bed_labels(in, registry, organ, dopt);
   const Volume* ct = !liver && dopt.bed_from_ct && in.ct ? in.ct() : nullptr;
   physics::LiverBedScore bed = physics::liver_bed_score(gb, liver, dopt, ct);
   auto index = std::make_shared<physics::SurfaceIndex>(std::vector<SurfaceMesh>{gb});
@@ -91,9 +93,13 @@ LiverBedForSolver liver_bed_for_solver(const SurfaceMesh& gb, const GuideInputs&
 
 GuidePaths write_guidance_paths(const GuideInputs& in, const fs::path& dest_dir, const GuideStageOptions& options,
                                 const OrganRegistry& registry) {
+  const std::vector<std::string> names = registry.path_names();
   for (const auto& n : options.only)
-    if (std::find(builtin_path_names().begin(), builtin_path_names().end(), n) == builtin_path_names().end())
-      throw UsageError("unknown path '" + n + "'", "paths: trachea_centerline, trachea_incision, gallbladder_dissection");
+    if (std::find(names.begin(), names.end(), n) == names.end()) {
+      std::string known;
+      for (const auto& k : names) known += (known.empty() ? "" : ", ") + k;
+      throw UsageError("unknown path '" + n + "'", "paths of the organ registry: " + known);
+    }
   const LabelMap& labels = *in.labels;
   auto wanted = [&](const std::string& n, std::uint8_t label) {
     if (!options.only.empty()) return std::find(options.only.begin(), options.only.end(), n) != options.only.end();
@@ -112,24 +118,23 @@ GuidePaths write_guidance_paths(const GuideInputs& in, const fs::path& dest_dir,
     // The path as its file holds it (4 decimals), through the file's reader.
     written.paths.push_back(physics::read_path_text(text, json));
   };
-  // The paths belong to two organs of the registry; an organ a registry lacks has no paths.
-  const OrganInfo* trachea = registry.find("trachea");
-  const OrganInfo* gallbladder = registry.find("gallbladder");
-  const bool want_centerline = trachea && wanted("trachea_centerline", trachea->label);
-  const bool want_incision = trachea && wanted("trachea_incision", trachea->label);
-  if (want_centerline || want_incision) {
+  auto named = [](Polyline line, const std::string& name) {
+    line.name = name;
+    return line;
+  };
+  auto make_tube_paths = [&](const OrganInfo& tube, bool want_centerline, bool want_incision) {
     physics::CenterlineOptions co = options.centerline;
-    co.label = trachea->label;
-    co.organ = trachea->name;
+    co.label = tube.label;
+    co.organ = tube.name;
     const physics::Centerline cl = physics::trachea_centerline(labels, co);
     if (want_centerline)
-      emit(cl.line, {{"cranial_extension_mm", cl.end_extension_mm[0]},
+      emit(named(cl.line, tube.name + "_centerline"), {{"cranial_extension_mm", cl.end_extension_mm[0]},
                      {"caudal_extension_mm", cl.end_extension_mm[1]},
                      {"spacing_mm", options.centerline.spacing_mm}});
     if (want_incision) {
-      const physics::SurfaceIndex wall({in.surface(trachea->name, trachea->wall_surface())});
+      const physics::SurfaceIndex wall({in.surface(tube.name, tube.wall_surface())});
       const physics::IncisionPath inc = physics::trachea_incision_path(cl, wall, options.incision);
-      emit(inc.line, {{"length_mm", inc.length_mm},
+      emit(named(inc.line, tube.name + "_incision"), {{"length_mm", inc.length_mm},
                       {"first_ring", double(inc.first_ring)},
                       {"last_ring", double(inc.last_ring)},
                       {"ring_pitch_mm", options.incision.ring_pitch_mm},
@@ -137,19 +142,19 @@ GuidePaths write_guidance_paths(const GuideInputs& in, const fs::path& dest_dir,
                       {"end_along_centerline_mm", inc.end_arc_mm},
                       {"max_wall_distance_mm", inc.max_wall_distance_mm}});
     }
-  }
-  if (gallbladder && wanted("gallbladder_dissection", gallbladder->label)) {
-    const SurfaceMesh gb = in.surface(gallbladder->name, gallbladder->surfaces().front());
+  };
+  auto make_dissection = [&](const OrganInfo& organ) {
+    const SurfaceMesh gb = in.surface(organ.name, organ.surfaces().front());
     physics::DissectionOptions dopt = options.dissection;
-    const LabelMap* liver = liver_labels(in, registry, dopt);
+    const LabelMap* liver = bed_labels(in, registry, organ, dopt);
     const Volume* ct = nullptr;
     if (!liver && dopt.bed_from_ct && in.ct) ct = in.ct();
     const physics::DissectionPath d = physics::gallbladder_dissection_path(gb, liver, dopt, ct);
     const std::string source =
         d.bed_source + (d.bed_source == "liver label" && liver != &labels ? " of the phantom ground truth" : "");
-    spdlog::info("guide: gallbladder liver bed from the {}: {:.0f} % of its surface, rim {:.0f} mm turning {:.0f}° "
+    spdlog::info("guide: {} {} bed from the {}: {:.0f} % of its surface, rim {:.0f} mm turning {:.0f}° "
                  "(at most {:.1f}°/mm)",
-                 source, 100.0 * d.covered_fraction, d.length_mm, d.total_turning_deg, d.max_turn_deg_per_mm);
+                 organ.name, organ.bed_organ.empty() ? "its" : organ.bed_organ, source, 100.0 * d.covered_fraction, d.length_mm, d.total_turning_deg, d.max_turn_deg_per_mm);
     std::vector<std::pair<std::string, double>> props = {
         {"bed_area_mm2", d.bed_area_mm2},
         {"covered_fraction", d.covered_fraction},
@@ -171,7 +176,16 @@ GuidePaths write_guidance_paths(const GuideInputs& in, const fs::path& dest_dir,
       props.push_back({"ct_band_hi_hu", d.ct_estimate.band_hi_hu});
       props.push_back({"ct_liver_region_ml", d.ct_estimate.liver_region_ml});
     }
-    emit(d.line, props, {{"bed_source", source}});
+    emit(named(d.line, organ.name + "_dissection"), props, {{"bed_source", source}});
+  };
+  // The registry says which organ has which paths (`paths`): the airway's centreline and
+  // incision on a tube, the dissection around a wall_body's bed.
+  auto has = [](const OrganInfo& o, const char* kind) { return std::find(o.paths.begin(), o.paths.end(), kind) != o.paths.end(); };
+  for (const OrganInfo& organ : registry.organs) {
+    const bool want_centerline = has(organ, "centerline") && wanted(organ.name + "_centerline", organ.label);
+    const bool want_incision = has(organ, "incision") && wanted(organ.name + "_incision", organ.label);
+    if (want_centerline || want_incision) make_tube_paths(organ, want_centerline, want_incision);
+    if (has(organ, "dissection") && wanted(organ.name + "_dissection", organ.label)) make_dissection(organ);
   }
   return written;
 }

@@ -20,13 +20,11 @@ struct GuideStageOptions {
   physics::CenterlineOptions centerline;
   physics::IncisionOptions incision;
   physics::DissectionOptions dissection;
-  /// Built-in paths to make: "trachea_centerline", "trachea_incision", "gallbladder_dissection".
-  /// Empty = every path whose organ the label map holds.
+  /// Paths to make, by name (<organ>_<kind>, OrganRegistry::path_names()). Empty = every path
+  /// whose organ the label map holds.
   std::vector<std::string> only;
 };
 
-/// Names of the built-in paths, in the order they are made.
-const std::vector<std::string>& builtin_path_names();
 
 /// What the guide stage reads: the label map, the phantom's ground truth (for the liver bed when
 /// the label map has no liver; may be null), the organ surfaces by (organ, surface name), in
@@ -51,22 +49,24 @@ struct GuideFiles {
 };
 GuideFiles read_guide_inputs(const std::filesystem::path& out_dir, bool ras = false);
 
-/// Makes the built-in paths `options` asks for (all whose organ the label map holds by default),
-/// writes <name>.json and <name>.vtp per path into `dest_dir` (created) and returns the file names
-/// and the paths.
-/// The trachea's and the liver's labels and the organs' surface names come from `registry`.
-/// The gallbladder's liver bed as the solver model's fixed set takes it, by the same rule as the
-/// dissection path (`physics::liver_bed_score`: the liver label of the label map or of the
-/// phantom's ground truth, else the CT, else the liver's usual direction): the score at the point
-/// of `gallbladder_surface` nearest to a query point (interpolated over its triangle), and the
-/// source in words. The solver model and the guide stage so fix the organ where the path cuts.
+/// A wall_body organ's bed (its registry's `bed_organ`, e.g. the gallbladder's liver bed) as
+/// the solver model's fixed set takes it, by the same rule as its dissection path
+/// (`physics::liver_bed_score`: the bed organ's label in the label map or the phantom's ground
+/// truth, else the CT, else the bed's usual direction): the score at the point of `surface`
+/// nearest to a query point (interpolated over its triangle), and the source in words. The
+/// solver model and the guide stage so fix the organ where the path cuts.
 struct LiverBedForSolver {
   std::function<double(const Eigen::Vector3d&)> score;
   std::string source;
 };
-LiverBedForSolver liver_bed_for_solver(const SurfaceMesh& gallbladder_surface, const GuideInputs& inputs,
-                                       const GuideStageOptions& options, const OrganRegistry& registry);
+LiverBedForSolver liver_bed_for_solver(const SurfaceMesh& surface, const GuideInputs& inputs,
+                                       const GuideStageOptions& options, const OrganRegistry& registry,
+                                       const OrganInfo& organ);
 
+/// Makes the paths of the registry's organs (`OrganInfo::paths`) that `options` asks for (all
+/// whose organ the label map holds by default), writes <name>.json and <name>.vtp per path into
+/// `dest_dir` (created) and returns the file names and the paths. Labels, bed organs and surface
+/// names come from `registry`.
 struct GuidePaths {
   std::vector<std::string> files;  ///< file names written, in order
   std::vector<Polyline> paths;     ///< each path as its <name>.json holds it (its reader's result)

@@ -76,20 +76,21 @@ OrganMeshes mesh_stage(const MeshStageInputs& in, const MeshStageOptions& mo, co
   if (mo.material_band) ex.material_band = region_band_materials(*in.registry, in.band_organs);
   ex.scenarios = scenarios(in, mo);
   if (const auto& p = in.probe_lps_mm; p.size() == 3) ex.boundaries.probe_lps_mm = Eigen::Vector3d(p[0], p[1], p[2]);
-  // The gallbladder's liver bed (its fixed set) by the guide stage's rule: a liver label, else
-  // the CT, else the liver's usual direction.
-  if (const OrganInfo* gb = in.registry->find("gallbladder"))
-    for (const auto& organ : meshes.organs)
-      if (organ.spec.name == gb->name && organ.spec.model == OrganModel::wall_body && !organ.volume.tets.empty()) {
-        GuideInputs bed_in;
-        bed_in.labels = in.labels;
-        if (in.truth) bed_in.truth = in.truth();
-        bed_in.ct = in.ct;
-        const LiverBedForSolver bed = liver_bed_for_solver(organ.surfaces.front().mesh, bed_in, in.guide, *in.registry);
-        ex.boundaries.liver_bed_score = bed.score;
-        ex.boundaries.liver_bed_source = bed.source;
-        spdlog::info("mesh: {} liver bed (fixed in its load case) from the {}", gb->name, bed.source);
-      }
+  // A wall_body organ's bed (its fixed set) by the guide stage's rule: its bed organ's label,
+  // else the CT, else the bed's usual direction.
+  for (const auto& organ : meshes.organs)
+    if (organ.spec.model == OrganModel::wall_body && !organ.volume.tets.empty()) {
+      const OrganInfo& info = in.registry->at(organ.spec.name);
+      GuideInputs bed_in;
+      bed_in.labels = in.labels;
+      if (in.truth) bed_in.truth = in.truth();
+      bed_in.ct = in.ct;
+      const LiverBedForSolver bed = liver_bed_for_solver(organ.surfaces.front().mesh, bed_in, in.guide, *in.registry, info);
+      ex.boundaries.bed_score[organ.spec.name] = bed.score;
+      ex.boundaries.bed_source[organ.spec.name] = bed.source;
+      spdlog::info("mesh: {} {} bed (fixed in its load case) from the {}", info.name,
+                   info.bed_organ.empty() ? "its" : info.bed_organ, bed.source);
+    }
   std::vector<std::string> warnings;
   fs::create_directories(meshes_dir);
   export_meshes(meshes, meshes_dir, ex, &warnings);

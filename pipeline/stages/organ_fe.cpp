@@ -38,11 +38,16 @@ OrganFe organ_fe(const fs::path& out, const std::string& organ, const OrganFeOpt
   SolverInput in = read_solver_inp(r.inp);
   SolverModel& m = in.model;
   if (o.probe_lps_mm) {
-    if (!m.surfaces.count(organ + "_outer") || !m.surfaces.count(organ + "_liver_bed"))
-      throw InputError(ExitCode::unsupported_input, organ + " has no liver bed in its solver file, so no probe can be placed", r.inp,
-                       "the probe presses organs held by a liver bed (the gallbladder)");
+    // The bed the organ is held by: its surface <organ>_<bed organ>_bed (the gallbladder's liver bed).
+    std::string bed;
+    for (const auto& [name, _] : m.surfaces)
+      if (name.rfind(organ + "_", 0) == 0 && name.size() > organ.size() + 4 && name.compare(name.size() - 4, 4, "_bed") == 0)
+        bed = name.substr(organ.size() + 1);
+    if (!m.surfaces.count(organ + "_outer") || bed.empty())
+      throw InputError(ExitCode::unsupported_input, organ + " has no bed in its solver file, so no probe can be placed", r.inp,
+                       "the probe presses organs held by a bed (the gallbladder's liver bed)");
     m.node_sets.erase(organ + "_probe_nodes");
-    add_indentation_probe(m, o.probe_lps_mm, in.indentation() ? in.probe.diameter_mm : 5.0);
+    add_indentation_probe(m, o.probe_lps_mm, in.indentation() ? in.probe.diameter_mm : 5.0, bed);
     if (!m.probe) throw InputError(ExitCode::unsupported_input, "no free surface to place the probe on", r.inp);
     r.probe = *m.probe;
     r.probe->thickness_mm = m.probe->thickness_mm;
@@ -153,11 +158,18 @@ std::unique_ptr<RealtimeOrgan> realtime_organ(const fs::path& out, const std::st
 std::unique_ptr<RealtimeOrgan> fe_for_haptics(const fs::path& out, const std::string& flag, double tool_radius_mm, bool quadratic) {
   if (flag == "none") return nullptr;
   if (!flag.empty()) return realtime_organ(out, flag, tool_radius_mm, quadratic);
-  if (!fs::exists(OutputLayout{out}.volume("gallbladder", "inp"))) return nullptr;
+  // By default the first organ of the run's registry pressed by the probe (its load case; the
+  // gallbladder) whose solver file exists.
+  std::string organ;
+  for (const OrganInfo& o : registry_of_output(out).organs)
+    if (organ.empty() && o.mesh == OrganMeshModel::wall_body && o.load_case == "indentation" &&
+        fs::exists(OutputLayout{out}.volume(o.name, "inp")))
+      organ = o.name;
+  if (organ.empty()) return nullptr;
   try {
-    return realtime_organ(out, "gallbladder", tool_radius_mm, quadratic);
+    return realtime_organ(out, organ, tool_radius_mm, quadratic);
   } catch (const Error& e) {
-    spdlog::warn("the gallbladder is felt through its surface: no finite-element model from its solver file ({})", e.what());
+    spdlog::warn("the {} is felt through its surface: no finite-element model from its solver file ({})", organ, e.what());
     return nullptr;
   }
 }

@@ -80,6 +80,29 @@ TEST(OrganRegistry, MistakesNameTheOrganAndKey) {
   EXPECT_TRUE(has(e, "colour")) << e;
   e = registry_error("[gallbladder.segment]\nalpah = 0.5\n");
   EXPECT_TRUE(has(e, "alpah")) << e;
+  // Guidance paths and beds: a path kind its mesh model cannot carry, a bed organ the registry
+  // lacks, a bed on an organ without a body.
+  e = registry_error("[liver]\nmesh = \"solid\"\nmaterials = { liver = \"fung-organ/table-5.1.2/mean\" }\npaths = [\"centerline\"]\n");
+  EXPECT_TRUE(has(e, "[liver] paths has 'centerline', which only a tube has")) << e;
+  e = registry_error("[trachea]\npaths = [\"dissection\"]\n");
+  EXPECT_TRUE(has(e, "[trachea] paths has 'dissection', which only a wall_body has")) << e;
+  e = registry_error("[trachea]\npaths = [\"centreline\"]\n");
+  EXPECT_TRUE(has(e, "'centreline', not a path kind")) << e;
+  e = registry_error("[gallbladder]\nbed_organ = \"spleen\"\n");
+  EXPECT_TRUE(has(e, "bed_organ 'spleen' is no other organ of the registry") && has(e, "liver")) << e;
+  e = registry_error("[trachea]\nbed_organ = \"liver\"\n");
+  EXPECT_TRUE(has(e, "[trachea] has a bed_organ, which only a wall_body takes")) << e;
+  EXPECT_EQ(builtin_organ_registry().path_names(),
+            (std::vector<std::string>{"gallbladder_dissection", "trachea_centerline", "trachea_incision"}));
+  // A case's guide paths are the registry's.
+  try {
+    parse_case("[case]\ninput = \"phantom\"\n[[organ]]\nname = \"trachea\"\n[stages.guide]\npaths = [\"trachea_dissection\"]\n",
+               "/cases/c.toml");
+    ADD_FAILURE() << "a path no organ has was accepted";
+  } catch (const Error& e) {
+    EXPECT_TRUE(has(e.what(), "'trachea_dissection', which no organ of the registry has") && has(e.what(), "trachea_incision"))
+        << e.what();
+  }
   // A case may only model organs with a mesh model, and a non-segmented one needs a label map.
   try {
     parse_case("[case]\ninput = \"scan.nii.gz\"\n[[organ]]\nname = \"lungs\"\n", "/cases/c.toml");
@@ -131,4 +154,38 @@ TEST(OrganRegistry, ACaseAddsAThirdOrganThatIsMeshedExportedAndDrawn) {
   EXPECT_GT(brown, 2000u);
   // The manifest names the registry file, so that later commands (snapshot, guide) read it too.
   EXPECT_EQ(read_json(tmp / "out" / "manifest.json")["case"]["organ_registry"], (tmp / "organs.toml").string());
+}
+
+// An organ the embedded registry does not have, with its own load case, bed and guidance path
+// and no segmentation preset (so its driver is the label map), added by a registry file and run
+// end to end: the phantom's gallbladder relabelled as a "cyst" lying on the liver, loaded by a
+// lumen pressure instead of the probe. Its solver file fixes its liver bed (found from the liver
+// label) and presses its lumen; the guide stage rims the bed with its own dissection path.
+TEST(OrganRegistry, ARegistryFileAddsAnOrganWithItsOwnLoadCaseBedAndPath) {
+  ScratchDir tmp("registry-cyst");
+  std::ofstream(tmp / "organs.toml") << "[gallbladder]\nlabel = 9\n"
+                                        "[cyst]\nlabel = 1\nmesh = \"wall_body\"\nwall_mm = 2.0\n"
+                                        "materials = { cyst_wall = \"fung-wall/table-5.1.1/mean\", cyst_body = \"fung-organ/table-5.1.2/mean\" }\n"
+                                        "load_case = \"pressure\"\npressure_kPa = 1.0\nbed_organ = \"liver\"\npaths = [\"dissection\"]\n"
+                                        "colour = [0.2, 0.4, 0.8]\n";
+  std::ofstream(tmp / "case.toml") << "[case]\nname = \"cyst\"\ninput = \"phantom\"\norgans = \"organs.toml\"\n"
+                                      "[phantom]\nsize = 160\nslice_mm = 5.0\n"
+                                      "[[organ]]\nname = \"cyst\"\n"
+                                      "[stages.mesh]\nformats = [\"inp\", \"vtu\"]\nquality_gate = \"report\"\n"
+                                      "[stages.guide]\npaths = [\"cyst_dissection\"]\n"
+                                      "[stages.snapshot]\nviews = [\"organs\"]\nwidth_px = 320\nheight_px = 240\n";
+  std::string log;
+  ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(tmp / "out"), &log), 0) << log;
+  const std::string inp = organsmith::testing::read_file(tmp / "out" / "meshes" / "cyst" / "cyst.inp");
+  EXPECT_TRUE(has(inp, "** cyst_liver_bed: the liver bed from the liver label")) << inp.substr(0, 1200);
+  EXPECT_TRUE(has(inp, "*BOUNDARY\ncyst_liver_bed_nodes, 1, 3")) << inp.substr(0, 1200);
+  EXPECT_TRUE(has(inp, "cyst_lumen, P, 0.001")) << "the registry's 1 kPa on the lumen";
+  EXPECT_TRUE(has(inp, "** Load case: cyst_liver_bed fixed;")) << inp.substr(inp.find("** Load case"), 300);
+  EXPECT_FALSE(has(inp, "indentation test")) << "its load case is the pressure, not the probe";
+  const nlohmann::json path = read_json(tmp / "out" / "paths" / "cyst_dissection.json");
+  EXPECT_EQ(path["name"], "cyst_dissection");
+  EXPECT_TRUE(path["closed"].get<bool>());
+  EXPECT_EQ(path["properties"]["bed_from_liver_label"].get<double>(), 1.0);
+  EXPECT_GT(path["point_count"].get<int>(), 20);
+  EXPECT_FALSE(fs::exists(tmp / "out" / "paths" / "gallbladder_dissection.json"));
 }
