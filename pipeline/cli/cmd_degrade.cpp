@@ -15,6 +15,7 @@
 #include "physics/degradation/degradation.h"
 #include "pipeline/cli/commands.h"
 #include "pipeline/output/output_dir.h"
+#include "pipeline/output/output_layout.h"
 #include "pipeline/run/terminal_progress.h"
 #include "viewer/display.h"
 #include "viewer/snapshot.h"
@@ -194,12 +195,13 @@ void write_plot_pngs(const std::vector<Plot>& plots, const fs::path& dir) {
   scene.plots = plots;
   SnapshotOptions so;
   so.views = {ViewKind::plots};
-  fs::create_directories(dir / "snapshots");
+  const fs::path snapshots = DegradeLayout{dir}.snapshots_dir();
+  fs::create_directories(snapshots);
   NullProgress quiet;
   try {
-    render_snapshots(scene, so, dir / "snapshots", quiet);
+    render_snapshots(scene, so, snapshots, quiet);
   } catch (const DisplayError& e) {
-    fs::remove_all(dir / "snapshots");
+    fs::remove_all(snapshots);
     spdlog::warn("pictures skipped: {}", e.what());
   }
 }
@@ -296,14 +298,12 @@ int run_simulate(const DegradeFlags& f) {
   }
   j["initial_energy_peaks"] = peaks;
   nlohmann::json st = nlohmann::json::array();
-  st.push_back({{"file", "stage_0_0.0w.vtp"}, {"t_days", 0.0}, {"weeks", 0.0}, {"previous", nullptr}});
+  st.push_back({{"file", DegradeLayout::stage_name(0, 0.0)}, {"t_days", 0.0}, {"weeks", 0.0}, {"previous", nullptr}});
   for (std::size_t k = 0; k < r.stages.size(); ++k) {
-    char name[64];
-    std::snprintf(name, sizeof name, "stage_%zu_%.1fw.vtp", k + 1, r.stages[k].t_days / 7.0);
-    st.push_back({{"file", name}, {"t_days", r.stages[k].t_days}, {"weeks", r.stages[k].t_days / 7.0},
+    st.push_back({{"file", DegradeLayout::stage_name(k + 1, r.stages[k].t_days / 7.0)}, {"t_days", r.stages[k].t_days}, {"weeks", r.stages[k].t_days / 7.0},
                   {"previous", st.back()["file"]}});
   }
-  j["original"] = "original.vtp";
+  j["original"] = DegradeLayout::original_name;
   j["stages"] = st;
   const double mass0_mg = p.density_g_per_cm3 * p.area_mm2() * g.total_length_mm();
   j["initial_mass_mg"] = mass0_mg;
@@ -326,14 +326,15 @@ int run_simulate(const DegradeFlags& f) {
 
   const fs::path out = dir.path();
   dir.commit("degrade", [&](const fs::path& dir) {
-    write_file_atomic(dir / "original.vtp", stage_vtp(model, nullptr, "original (stress-free) shape"));
-    write_file_atomic(dir / "stage_0_0.0w.vtp", stage_vtp(model, &r.initial, "deployed, t = 0"));
+    const DegradeLayout staged{dir};
+    write_file_atomic(staged.original(), stage_vtp(model, nullptr, "original (stress-free) shape"));
+    write_file_atomic(staged.stage(0, 0.0), stage_vtp(model, &r.initial, "deployed, t = 0"));
     for (std::size_t k = 0; k < r.stages.size(); ++k)
       write_file_atomic(dir / st[k + 1]["file"].get<std::string>(),
                  stage_vtp(model, &r.stages[k], "t = " + num(r.stages[k].t_days) + " days"));
-    write_file_atomic(dir / "mass.csv", csv.str());
+    write_file_atomic(staged.mass(), csv.str());
     if (f.snapshots) write_plot_pngs(degradation_plots(model, r, f.load_n, f.tau_d), dir);
-    write_file_atomic(dir / "summary.json", j.dump(2) + "\n");
+    write_file_atomic(staged.summary(), j.dump(2) + "\n");
   });
   std::cout << "clip " << p.name << " (" << g.elements() << " elements) under " << num(f.load_n) << " N, τ_D "
             << num(f.tau_d) << " " << kTauUnitName << "\n"
@@ -396,9 +397,10 @@ int run_fit(const DegradeFlags& f) {
   for (const auto& s : curve.steps) curve_csv << num(s.t_days) << ',' << num(s.mass_fraction) << '\n';
   const fs::path out = out_dir.path();
   out_dir.commit("degrade-fit", [&](const fs::path& dir) {
-    write_file_atomic(dir / "fit.json", j.dump(2) + "\n");
-    write_file_atomic(dir / "fit.csv", csv.str());
-    write_file_atomic(dir / "model_mass.csv", curve_csv.str());
+    const DegradeLayout staged{dir};
+    write_file_atomic(staged.fit_json(), j.dump(2) + "\n");
+    write_file_atomic(staged.fit_csv(), csv.str());
+    write_file_atomic(staged.model_mass(), curve_csv.str());
     if (f.snapshots) {
       Plot p;
       p.name = "degradation_fit";

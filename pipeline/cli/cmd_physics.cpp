@@ -15,6 +15,7 @@
 #include "pipeline/cli/commands.h"
 #include "pipeline/case/organ_registry.h"
 #include "pipeline/output/output_dir.h"
+#include "pipeline/output/output_layout.h"
 #include "pipeline/run/terminal_progress.h"
 
 #include <nlohmann/json.hpp>
@@ -243,13 +244,13 @@ int run_calibrate(const ModelFlags& mf, const FitFlags& ff, const fs::path& data
   if (cutting) j["blade_speed_m_per_s"] = mf.options.blade_speed_m_per_s;
   if (mf.model == "ogden") j["ogden_terms"] = mf.options.ogden_terms;
   j["tool_version"] = tool_version();
-  commit_files(dir, "calibrate", {{"fit.csv", fit_csv(data, r, cutting)}, {"params.json", j.dump(2) + "\n"}});
+  commit_files(dir, "calibrate", {{CalibrateLayout::fit_name, fit_csv(data, r, cutting)}, {CalibrateLayout::params_name, j.dump(2) + "\n"}});
   std::cout << model->name() << " fitted to " << data.points.size() << " points in " << num(r.seconds) << " s\n";
   for (std::size_t k = 0; k < model->parameter_count(); ++k)
     std::cout << "  " << model->parameters()[k].name << " = " << num(r.parameters[k]) << " "
               << model->parameters()[k].unit << "\n";
   std::cout << "  SSE " << num(r.stats.sse) << ", R² " << num(r.stats.r2) << ", RMSE " << num(r.stats.rmse) << "\n"
-            << "wrote " << (out / "params.json").string() << " and " << (out / "fit.csv").string() << "\n";
+            << "wrote " << CalibrateLayout{out}.params().string() << " and " << CalibrateLayout{out}.fit().string() << "\n";
   return 0;
 }
 
@@ -304,12 +305,12 @@ int run_uncertainty(const UncertaintyFlags& u, const ModelFlags& mf, const FitFl
     for (std::size_t k = 0; k < model->parameter_count(); ++k)
       j["summary"].push_back({{"name", model->parameters()[k].name}, {"unit", model->parameters()[k].unit},
                               {"mean", dc.mean[k]}, {"sd", dc.sd[k]}});
-    commit_files(dir, stage, {{"dc.csv", csv.str()}, {"dc.json", j.dump(2) + "\n"}});
+    commit_files(dir, stage, {{UncertaintyLayout::csv_name("dc"), csv.str()}, {UncertaintyLayout::json_name("dc"), j.dump(2) + "\n"}});
     std::cout << "DC over " << dc.fits.size() << " specimens:\n";
     for (std::size_t k = 0; k < model->parameter_count(); ++k)
       std::cout << "  " << model->parameters()[k].name << " mean " << num(dc.mean[k]) << " sd " << num(dc.sd[k]) << " "
                 << model->parameters()[k].unit << "\n";
-    std::cout << "wrote " << (out / "dc.json").string() << " and " << (out / "dc.csv").string() << "\n";
+    std::cout << "wrote " << UncertaintyLayout{out}.json("dc").string() << " and " << UncertaintyLayout{out}.csv("dc").string() << "\n";
     return 0;
   }
 
@@ -344,12 +345,12 @@ int run_uncertainty(const UncertaintyFlags& u, const ModelFlags& mf, const FitFl
     csv << "stretch,sigma_T_pa,predicted_sigma_T_pa\n";
     for (std::size_t k = 0; k < t.stretch.size(); ++k)
       csv << num(t.stretch[k]) << ',' << num(t.sigma_T_Pa[k]) << ',' << num(r.predicted_sd_Pa[k]) << '\n';
-    commit_files(dir, stage, {{"imvfosm.csv", csv.str()}, {"imvfosm.json", j.dump(2) + "\n"}});
+    commit_files(dir, stage, {{UncertaintyLayout::csv_name("imvfosm"), csv.str()}, {UncertaintyLayout::json_name("imvfosm"), j.dump(2) + "\n"}});
     std::cout << "IMVFOSM (" << u.derivatives << " derivatives, " << t.id << "): RMS relative σ_T error "
               << num(100 * r.rms_relative_error) << " %\n";
     for (std::size_t k = 0; k < r.sigma.size(); ++k)
       std::cout << "  σ_" << model->parameters()[k].name << " = " << num(r.sigma[k]) << " " << model->parameters()[k].unit << "\n";
-    std::cout << "wrote " << (out / "imvfosm.json").string() << " and " << (out / "imvfosm.csv").string() << "\n";
+    std::cout << "wrote " << UncertaintyLayout{out}.json("imvfosm").string() << " and " << UncertaintyLayout{out}.csv("imvfosm").string() << "\n";
     return 0;
   }
 
@@ -390,7 +391,7 @@ int run_uncertainty(const UncertaintyFlags& u, const ModelFlags& mf, const FitFl
                               {"mc_mean_pa", mc.moments.mean_Pa[k]}, {"mc_sd_pa", mc.moments.sd_Pa[k]},
                               {"mc_median_pa", mc.median_Pa[k]}, {"mc_robust_sd_pa", mc.robust_sd_Pa[k]}});
   }
-  commit_files(dir, stage, {{"cdf.csv", csv.str()}, {"summary.json", j.dump(2) + "\n"}});
+  commit_files(dir, stage, {{UncertaintyLayout::mc_cdf_name, csv.str()}, {UncertaintyLayout::mc_summary_name, j.dump(2) + "\n"}});
   std::cout << "Monte Carlo, " << u.samples << " draws of " << preset.id << " (" << u.spread << "); "
             << mc.invalid_draws << " draws outside the model's domain were left out\n"
             << "  stretch  linearised mean ± sd   MC mean ± sd   MC median ± robust sd  (Pa)\n";
@@ -398,7 +399,7 @@ int run_uncertainty(const UncertaintyFlags& u, const ModelFlags& mf, const FitFl
     std::cout << "  " << num(stretches[k]) << "  " << num(lin.mean_Pa[k]) << " ± " << num(lin.sd_Pa[k]) << "   "
               << num(mc.moments.mean_Pa[k]) << " ± " << num(mc.moments.sd_Pa[k]) << "   " << num(mc.median_Pa[k])
               << " ± " << num(mc.robust_sd_Pa[k]) << "\n";
-  std::cout << "wrote " << (out / "cdf.csv").string() << " and " << (out / "summary.json").string() << "\n";
+  std::cout << "wrote " << UncertaintyLayout{out}.mc_cdf().string() << " and " << UncertaintyLayout{out}.mc_summary().string() << "\n";
   return 0;
 }
 

@@ -3,6 +3,8 @@
 // readers (resume, `snapshot`, `preview`, `haptics`) all take their paths from here; a stage that
 // writes into a staging folder uses the layout of that folder (the same relative paths).
 
+#include <cstddef>
+#include <cstdio>
 #include <filesystem>
 #include <string>
 
@@ -61,6 +63,51 @@ struct OutputLayout {
     return root / "logs" / ("simulate_" + organ + "_solver.log");
   }
 
+  std::filesystem::path snapshots_dir() const { return root / "snapshots"; }
+};
+
+/// `organsmith calibrate --out DIR`: the fitted parameters and the fit against the data. Names
+/// relative to the folder (`*_name`) for writers that stage files by name.
+struct CalibrateLayout {
+  std::filesystem::path root;
+  static constexpr const char* params_name = "params.json";
+  static constexpr const char* fit_name = "fit.csv";
+  std::filesystem::path params() const { return root / params_name; }
+  std::filesystem::path fit() const { return root / fit_name; }
+};
+
+/// `organsmith uncertainty --out DIR`: per method, <method>.json and <method>.csv ("dc",
+/// "imvfosm"); the Monte Carlo writes summary.json and cdf.csv.
+struct UncertaintyLayout {
+  std::filesystem::path root;
+  static std::string json_name(const std::string& method) { return method + ".json"; }
+  static std::string csv_name(const std::string& method) { return method + ".csv"; }
+  static constexpr const char* mc_summary_name = "summary.json";
+  static constexpr const char* mc_cdf_name = "cdf.csv";
+  std::filesystem::path json(const std::string& method) const { return root / json_name(method); }
+  std::filesystem::path csv(const std::string& method) const { return root / csv_name(method); }
+  std::filesystem::path mc_summary() const { return root / mc_summary_name; }
+  std::filesystem::path mc_cdf() const { return root / mc_cdf_name; }
+};
+
+/// `organsmith degrade --out DIR`: the clip's shapes (original, deployed, one per stage), its
+/// mass over time and the summary; `degrade --fit` writes the fit's files; plots under snapshots/.
+struct DegradeLayout {
+  std::filesystem::path root;
+  static constexpr const char* original_name = "original.vtp";
+  /// Stage k (0 = deployed) at `weeks`: "stage_<k>_<weeks, 1 decimal>w.vtp".
+  static std::string stage_name(std::size_t k, double weeks) {
+    char name[64];
+    std::snprintf(name, sizeof name, "stage_%zu_%.1fw.vtp", k, weeks);
+    return name;
+  }
+  std::filesystem::path original() const { return root / original_name; }
+  std::filesystem::path stage(std::size_t k, double weeks) const { return root / stage_name(k, weeks); }
+  std::filesystem::path mass() const { return root / "mass.csv"; }
+  std::filesystem::path summary() const { return root / "summary.json"; }
+  std::filesystem::path fit_json() const { return root / "fit.json"; }
+  std::filesystem::path fit_csv() const { return root / "fit.csv"; }
+  std::filesystem::path model_mass() const { return root / "model_mass.csv"; }
   std::filesystem::path snapshots_dir() const { return root / "snapshots"; }
 };
 

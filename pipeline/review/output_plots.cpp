@@ -56,8 +56,8 @@ Rgb series_colour(std::size_t i) { return kSeriesColours[i % std::size(kSeriesCo
 /// `organsmith calibrate` output (params.json + fit.csv): measured points against the fitted
 /// model, one pair of series per specimen and load case.
 std::optional<Plot> calibration_fit_plot(const fs::path& dir, const std::string& stem) {
-  const nlohmann::json params = read_json_or_null(dir / "params.json");
-  const auto csv = read_csv(dir / "fit.csv");
+  const nlohmann::json params = read_json_or_null(CalibrateLayout{dir}.params());
+  const auto csv = read_csv(CalibrateLayout{dir}.fit());
   if (!params.is_object() || !csv) return std::nullopt;
   const bool cutting = csv->column("displacement_m") >= 0;
   const int cx = csv->column(cutting ? "displacement_m" : "stretch");
@@ -65,7 +65,7 @@ std::optional<Plot> calibration_fit_plot(const fs::path& dir, const std::string&
   const int cf = csv->column(cutting ? "model_force_n" : "model_stress_pa");
   const int cs = csv->column("specimen"), cl = csv->column("load");
   if (cx < 0 || cm < 0 || cf < 0) {
-    spdlog::warn("{}: columns not as `organsmith calibrate` writes them; not drawn", (dir / "fit.csv").string());
+    spdlog::warn("{}: columns not as `organsmith calibrate` writes them; not drawn", CalibrateLayout{dir}.fit().string());
     return std::nullopt;
   }
   // Measured points by (load, specimen): colour by load case, marker by specimen. The fitted
@@ -132,8 +132,8 @@ std::optional<Plot> calibration_fit_plot(const fs::path& dir, const std::string&
 /// `organsmith uncertainty --method mc` output (cdf.csv + summary.json): the stress CDF at each
 /// stretch.
 std::optional<Plot> monte_carlo_plot(const fs::path& dir, const std::string& stem) {
-  const nlohmann::json summary = read_json_or_null(dir / "summary.json");
-  const auto csv = read_csv(dir / "cdf.csv");
+  const nlohmann::json summary = read_json_or_null(UncertaintyLayout{dir}.mc_summary());
+  const auto csv = read_csv(UncertaintyLayout{dir}.mc_cdf());
   if (!summary.is_object() || !csv) return std::nullopt;
   const int cs = csv->column("stretch"), cp = csv->column("probability"), cx = csv->column("stress_pa");
   if (cs < 0 || cp < 0 || cx < 0) return std::nullopt;

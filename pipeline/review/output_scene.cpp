@@ -401,8 +401,8 @@ void load_output_scene(const fs::path& out, const LoadFlags& flags, OutputScene&
       return unique;
     };
     for (const auto& d : dirs) {
-      const bool fit = fs::exists(d / "params.json") && fs::exists(d / "fit.csv");
-      const bool mc = fs::exists(d / "summary.json") && fs::exists(d / "cdf.csv");
+      const bool fit = fs::exists(CalibrateLayout{d}.params()) && fs::exists(CalibrateLayout{d}.fit());
+      const bool mc = fs::exists(UncertaintyLayout{d}.mc_summary()) && fs::exists(UncertaintyLayout{d}.mc_cdf());
       if (!fit && !mc) continue;
       const std::string stem = stem_of(d);
       if (fit)
