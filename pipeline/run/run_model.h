@@ -8,6 +8,7 @@
 #include "core/geometry.h"
 #include "meshing/mesh.h"
 #include "pipeline/review/output_scene.h"
+#include "pipeline/stages/ingest_stage.h"
 
 #include <Eigen/Core>
 
@@ -18,12 +19,6 @@
 
 namespace organsmith {
 
-/// An organ's seed as the ingest stage resolved it (ingest.json "organs").
-struct OrganSeed {
-  std::string organ;
-  std::optional<Eigen::Vector3d> lps_mm;  ///< none: found automatically or taken from a label map
-  std::string source;                     ///< "case file (LPS mm)", "phantom seeds.json", "automatic", …
-};
 
 struct RunModel {
   std::optional<Volume> ct;                     ///< ingest: the CT in HU on its grid (LPS mm)

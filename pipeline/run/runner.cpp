@@ -13,6 +13,7 @@
 #include "core/memory.h"
 #include "core/sha256.h"
 #include "pipeline/stages/guide_stage.h"
+#include "pipeline/stages/ingest_stage.h"
 #include "pipeline/stages/mesh_stage.h"
 #include "pipeline/stages/simulate_stage.h"
 #include "pipeline/stages/segment_stage.h"
@@ -86,54 +87,6 @@ std::string input_stat_digest(const fs::path& input) {
   return s.hex_digest();
 }
 
-nlohmann::json grid_json(const ImageGrid& g) {
-  nlohmann::json dir = nlohmann::json::array();
-  for (int c = 0; c < 3; ++c) dir.push_back({g.direction_lps(0, c), g.direction_lps(1, c), g.direction_lps(2, c)});
-  return {{"size_vox", g.size_vox},
-          {"spacing_mm", {g.spacing_mm.x(), g.spacing_mm.y(), g.spacing_mm.z()}},
-          {"origin_lps_mm", {g.origin_lps_mm.x(), g.origin_lps_mm.y(), g.origin_lps_mm.z()}},
-          {"direction_lps_columns", dir}};
-}
-
-/// ingest.json's "organs": the writer of the seeds …
-nlohmann::json ingest_seeds_json(const std::vector<OrganSeed>& seeds, const ImageGrid& grid) {
-  nlohmann::json organs = nlohmann::json::array();
-  for (const auto& s : seeds) {
-    nlohmann::json oj = {{"name", s.organ}};
-    if (s.lps_mm) {
-      const Eigen::Vector3d ijk = grid.lps_mm_to_index(*s.lps_mm);
-      oj["seed_lps_mm"] = {s.lps_mm->x(), s.lps_mm->y(), s.lps_mm->z()};
-      oj["seed_ijk"] = {ijk.x(), ijk.y(), ijk.z()};
-    }
-    oj["seed_source"] = s.source;
-    organs.push_back(oj);
-  }
-  return organs;
-}
-
-/// … and its reader, for a run that reuses the ingest stage.
-std::vector<OrganSeed> read_ingest_seeds(const fs::path& ingest_json) {
-  const std::optional<std::string> text = read_file(ingest_json);
-  if (!text)
-    throw InputError(ExitCode::input_not_found, "the ingest stage's record is missing", ingest_json,
-                     "run the case from its start (organsmith run CASE)");
-  std::vector<OrganSeed> seeds;
-  try {
-    const nlohmann::json j = nlohmann::json::parse(*text);
-    for (const auto& o : j.at("organs")) {
-      OrganSeed s{o.at("name").get<std::string>(), std::nullopt, o.value("seed_source", "")};
-      if (o.contains("seed_lps_mm")) {
-        const auto& p = o["seed_lps_mm"];
-        s.lps_mm = Eigen::Vector3d(p.at(0).get<double>(), p.at(1).get<double>(), p.at(2).get<double>());
-      }
-      seeds.push_back(std::move(s));
-    }
-  } catch (const nlohmann::json::exception& e) {
-    throw InputError(ExitCode::unsupported_input, std::string("the ingest stage's record is malformed: ") + e.what(),
-                     ingest_json, "rerun the case with --force to read the input again");
-  }
-  return seeds;
-}
 
 struct Stage {
   std::string name;
@@ -408,52 +361,18 @@ class Runner {
   /// Ingest writes ingest.json: what was read, its geometry and digest, and the organ seeds
   /// resolved to LPS mm.
   void write_ingest(const fs::path& staging) {
-    IngestResult r = ingest(input_, case_.ingest, progress_);
-    for (const auto& w : r.report.warnings) spdlog::warn("ingest: {}", w);
-    input_digest_ = volume_digest(r.volume);
-    nlohmann::json j;
-    j["format"] = r.report.format;
-    j["digest_sha256"] = input_digest_;
-    j["grid"] = grid_json(r.volume.grid);
-    j["hu_range"] = {r.report.hu_min, r.report.hu_max};
-    if (r.report.format.rfind("DICOM", 0) == 0) {
-      j["series"] = {{"series_uid", r.report.series.series_uid},
-                     {"modality", r.report.series.modality},
-                     {"slices", r.report.series.files},
-                     {"transfer_syntax", r.report.series.transfer_syntax}};
-      j["other_series"] = nlohmann::json::array();
-      for (const auto& s : r.report.other_series)
-        j["other_series"].push_back({{"series_uid", s.series_uid}, {"modality", s.modality}, {"files", s.files}});
-    }
-    j["warnings"] = r.report.warnings;
-    model_.seeds = resolve_seeds(r.volume.grid);
-    j["organs"] = ingest_seeds_json(*model_.seeds, r.volume.grid);
-    input_json_ = {{"format", j["format"]}, {"digest_sha256", input_digest_}, {"grid", j["grid"]}};
-    write_file_atomic(OutputLayout{staging}.ingest(), j.dump(2) + "\n");
+    IngestStageInputs in;
+    in.input = input_;
+    in.organs = case_.organs;
+    in.registry = &case_.registry;
+    in.case_file = case_.source;
+    std::optional<std::map<std::string, Eigen::Vector3d>> read;
+    if (case_.synthesize_phantom)
+      in.phantom_seeds = model_.phantom_seeds ? &*model_.phantom_seeds : &read.emplace(read_seeds(layout_.phantom_seeds()));
+    IngestStageResult r = ingest_stage(in, case_.ingest, staging, progress_);
+    input_json_ = std::move(r.input);
+    model_.seeds = std::move(r.seeds);
     model_.ct = std::move(r.volume);
-  }
-
-  /// Each organ's seed in LPS mm (case file, else the phantom's seeds.json) and where it came from.
-  std::vector<OrganSeed> resolve_seeds(const ImageGrid& grid) {
-    std::map<std::string, Eigen::Vector3d> phantom_seeds;
-    if (case_.synthesize_phantom) phantom_seeds = model_.phantom_seeds ? *model_.phantom_seeds : read_seeds(layout_.phantom_seeds());
-    std::vector<OrganSeed> seeds;
-    for (const auto& o : case_.organs) {
-      OrganSeed s{o.name, std::nullopt, {}};
-      if (o.seed_lps_mm) s.lps_mm = o.seed_lps_mm, s.source = "case file (LPS mm)";
-      else if (o.seed_ijk) s.lps_mm = grid.index_to_lps_mm(*o.seed_ijk), s.source = "case file (voxel ijk)";
-      else if (phantom_seeds.count(o.name)) s.lps_mm = phantom_seeds[o.name], s.source = "phantom seeds.json";
-      else if (!o.label_map.empty()) s.source = "label map";
-      else s.source = case_.registry.at(o.name).needs_seed ? "none" : "automatic";
-      if (s.lps_mm) {
-        const Eigen::Vector3d ijk = grid.lps_mm_to_index(*s.lps_mm);
-        if (!grid.contains(std::lround(ijk.x()), std::lround(ijk.y()), std::lround(ijk.z())))
-          throw InputError(ExitCode::bad_seed, "the seed of organ '" + o.name + "' lies outside the image",
-                           case_.source, "check the seed: LPS mm as shown by `organsmith info`");
-      }
-      seeds.push_back(std::move(s));
-    }
-    return seeds;
   }
 
   /// The organ seeds: this run's ingest stage's, else read back from its ingest.json.
@@ -557,7 +476,6 @@ class Runner {
   nlohmann::json previous_;
   nlohmann::json materials_json_;  // the regions' calibrated laws (materials.json, the mesh stage's fingerprint)
   std::vector<StageRecord> records_;
-  std::string input_digest_;
   fs::path input_;
   RunModel model_;  // what the stages of this run made, handed on in memory
   bool done_ = false;     // set once the --until stage has run
