@@ -1,7 +1,7 @@
 // The stage runner. Over 400 lines for a reason: it is the one place that knows every stage of a
 // run, what each takes from the run's model or its files and what its fingerprint covers. The
 // stages' bodies are free functions (stages/*_stage.h, review/snapshot_stage.h); what stays here
-// is their order, their inputs, fingerprints, records, and the ingest stage's few lines.
+// is their order, their inputs, fingerprints and records.
 
 #include "pipeline/run/runner.h"
 #include "pipeline/output/tool_info.h"
