@@ -6,6 +6,7 @@
 #include "segmentation/gvf.h"
 #include "segmentation/presets.h"
 #include "segmentation/detail/region3d.h"
+#include "segmentation/detail/section_rules.h"
 #include "segmentation/slice_ops.h"
 #include "segmentation/snake.h"
 #include "segmentation/surface3d.h"
@@ -28,6 +29,8 @@ namespace organsmith {
 
 using seg::Image2f;
 using seg::Point2;
+using seg::area_outside;
+using seg::part_within;
 
 namespace {
 
@@ -37,68 +40,6 @@ namespace {
 /// noisier thick-slice runs from mean Dice 0.826 to 0.833 (segmentation README); 0.95 drops the
 /// shared real sweep's lowest run from 0.868 to 0.846.
 constexpr double kMinRecentredVolumeFraction = 0.8;
-
-/// Contours `a` and `b` (slice mm) rasterised on one pixel grid, `b` dilated by `tol_mm`.
-struct PairRaster {
-  cv::Mat a, b;
-  double x0 = 0, y0 = 0;
-  int pad = 0;
-};
-
-PairRaster raster_pair(const std::vector<Point2>& a, const std::vector<Point2>& b, double tol_mm, double sx, double sy) {
-  PairRaster r;
-  double x1 = -1e300, y1 = -1e300;
-  r.x0 = r.y0 = 1e300;
-  for (const auto* c : {&a, &b})
-    for (const auto& p : *c) r.x0 = std::min(r.x0, p.x), r.y0 = std::min(r.y0, p.y), x1 = std::max(x1, p.x), y1 = std::max(y1, p.y);
-  r.pad = int(std::ceil(tol_mm / std::min(sx, sy))) + 2;
-  const int w = int(std::ceil((x1 - r.x0) / sx)) + 2 * r.pad + 1, h = int(std::ceil((y1 - r.y0) / sy)) + 2 * r.pad + 1;
-  auto to_px = [&](const std::vector<Point2>& c) {
-    std::vector<Point2> q;
-    for (const auto& p : c) q.push_back({(p.x - r.x0) / sx + r.pad, (p.y - r.y0) / sy + r.pad});
-    return q;
-  };
-  r.a = cv::Mat::zeros(h, w, CV_8U);
-  r.b = cv::Mat::zeros(h, w, CV_8U);
-  rasterise(to_px(a), w, h, [&](int x, int y) { r.a.at<std::uint8_t>(y, x) = 255; });
-  rasterise(to_px(b), w, h, [&](int x, int y) { r.b.at<std::uint8_t>(y, x) = 255; });
-  if (tol_mm > 0) {
-    const int rx = std::max(1, int(std::lround(tol_mm / sx))), ry = std::max(1, int(std::lround(tol_mm / sy)));
-    cv::dilate(r.b, r.b, cv::getStructuringElement(cv::MORPH_ELLIPSE, {2 * rx + 1, 2 * ry + 1}));
-  }
-  return r;
-}
-
-/// Fraction of the area inside contour `a` that lies farther than `tol_mm` outside contour `b`
-/// (both in slice mm): how much of a new section is not a continuation of the previous one.
-double area_outside(const std::vector<Point2>& a, const std::vector<Point2>& b, double tol_mm, double sx, double sy) {
-  if (a.size() < 3 || b.size() < 3) return 0.0;
-  const PairRaster r = raster_pair(a, b, tol_mm, sx, sy);
-  const int n = cv::countNonZero(r.a);
-  if (n == 0) return 0.0;
-  cv::Mat out;
-  cv::bitwise_and(r.a, ~r.b, out);
-  return double(cv::countNonZero(out)) / n;
-}
-
-/// The part of section `a` within `tol_mm` of section `b` (its largest piece, as a contour of
-/// boundary-pixel centres in slice mm), and that part's area in mm²; empty where none.
-std::pair<std::vector<Point2>, double> part_within(const std::vector<Point2>& a, const std::vector<Point2>& b, double tol_mm,
-                                                   double sx, double sy) {
-  if (a.size() < 3 || b.size() < 3) return {};
-  const PairRaster r = raster_pair(a, b, tol_mm, sx, sy);
-  cv::Mat in;
-  cv::bitwise_and(r.a, r.b, in);
-  cv::Mat lab, stats, centres;
-  const int n = cv::connectedComponentsWithStats(in, lab, stats, centres, 4);
-  int best = 0;
-  for (int i = 1; i < n; ++i)
-    if (best == 0 || stats.at<int>(i, cv::CC_STAT_AREA) > stats.at<int>(best, cv::CC_STAT_AREA)) best = i;
-  if (best == 0) return {};
-  std::vector<Point2> out = seg::mask_outline_mm(lab == best, r.x0 - r.pad * sx, r.y0 - r.pad * sy, sx, sy);
-  if (out.size() < 4) return {};
-  return {out, stats.at<int>(best, cv::CC_STAT_AREA) * sx * sy};
-}
 
 std::string fmt_mm(const Eigen::Vector3d& p) {
   char b[96];
@@ -578,48 +519,25 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
               area_outside(again.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) <= p.max_shifted_fraction)
             f = std::move(again);
         }
-        // Why this slice's section does not continue the organ (empty: it does); `leak` says the
-        // reason is a leak into a neighbour.
+        // Whether this slice's section continues the organ (the stop rules: detail/section_rules.h).
         std::vector<Point2> moved_prev;
         for (const auto& q : prev) moved_prev.push_back({q.x + drift.x, q.y + drift.y});
-        auto why_not = [&](const Fit& f, bool& leak) -> std::string {
-          leak = false;
-          const std::string at = "stopped at slice " + std::to_string(k) + ": ";
-          if (f.area_mm2 < p.min_area_mm2) return at + "area collapsed";
-          leak = true;
-          const double base_area = areas[areas.size() > span ? areas.size() - span : 0];
-          if (f.area_mm2 > p.max_area_mm2 || f.area_mm2 > p.max_area_ratio * prev_area ||
-              f.area_mm2 > p.max_area_ratio * base_area)
-            return at + "area jumped (leak into a neighbour)";
-          // A section that grows while much of it lies off the previous one is a neighbour joined
-          // in (a bowel loop beside a tapering fundus between thick slices), not the organ going on.
-          if (f.area_mm2 > p.shift_growth_ratio * prev_area &&
-              area_outside(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction)
-            return at + "the section grew off the previous one (leak into a neighbour)";
-          // With a continuity margin, a section that does not grow and lies mostly off the previous
-          // one (moved by the organ's drift) is a neighbour: the contour drifted onto bowel beside
-          // the organ where the organ tapers (growing sections are the test above).
-          if (p.continuity_margin_mm > 0 && f.area_mm2 <= prev_area &&
-              area_outside(f.pts, moved_prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction)
-            return at + "the section lies off the previous one (drifted onto a neighbour)";
-          // After a slice held within reach, the section must also continue the last section
-          // found unaided: a held section past the organ's end does not vouch for the next one.
-          if (!anchor.empty() && f.area_mm2 > p.shift_growth_ratio * anchor_area &&
-              area_outside(f.pts, anchor, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction)
-            return at + "the section grew off the last section found unaided (leak into a neighbour)";
-          leak = false;
-          // A wall that is not visible all round (bile against liver of close HU on a noisy scan)
-          // ends the organ only where its 3-D region ends too.
-          const bool region_goes_on = a_under >= 0.5 * f.area_mm2 && a_under <= p.max_area_ratio * prev_area;
-          if (f.edge_support < p.min_edge_support && !region_goes_on)
-            return at + "edge support lost (no wall around most of the contour)";
-          const double m = median_inside(c, k, f.pts);
-          if (!(std::abs(m - mu) <= p.max_mean_drift_hu)) return at + "intensity drifted from the organ's";
-          return {};
+        seg::SectionHistory history;
+        history.previous = &prev;
+        history.previous_area_mm2 = prev_area;
+        history.earlier_area_mm2 = areas[areas.size() > span ? areas.size() - span : 0];
+        history.previous_moved = &moved_prev;
+        history.unaided = &anchor;
+        history.unaided_area_mm2 = anchor_area;
+        history.region_area_mm2 = a_under;
+        history.organ_mean_hu = mu;
+        history.sx = c.sx, history.sy = c.sy;
+        auto judge = [&](const Fit& x) {
+          return seg::judge_section({&x.pts, x.area_mm2, x.edge_support}, history, p,
+                                    [&] { return median_inside(c, k, x.pts); });
         };
-        bool leak = false;
-        std::string why = why_not(f, leak);
-        if (!why.empty() && leak && p.continuity_margin_mm > 0 && held_in_a_row < p.max_held_in_a_row) {
+        seg::SectionStop stop = judge(f);
+        if (seg::is_leak(stop) && p.continuity_margin_mm > 0 && held_in_a_row < p.max_held_in_a_row) {
           // A leak through a wall that noise or partial volume hides (duodenum beside the organ on a
           // thick slice) need not end the organ: the slice is fitted again with the pressure held
           // within a margin of the previous section, moved by the organ's drift, and the organ
@@ -628,7 +546,6 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
           reach.around = moved_prev;
           reach.margin_mm = p.continuity_margin_mm + p.continuity_slope * g.spacing_mm.z();
           Fit held = fit_slice(c, k, scaled(reach.around, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area), &reach);
-          bool leak2 = false;
           const double pinned = pinned_fraction(held.pts, reach, std::max(c.sx, c.sy));
           // A held section with its wall seen around most of it continues the organ though more
           // of it rests on the limit: a neighbour with no wall between (duodenum against the
@@ -636,19 +553,19 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
           // tissue with little wall (segmentation README, "Held sections with their wall").
           const bool rests_on_wall = pinned <= p.max_pinned_fraction ||
                                      (pinned <= p.max_pinned_fraction_walled && held.edge_support >= p.min_walled_edge_support);
-          if (rests_on_wall && why_not(held, leak2).empty()) {
+          if (rests_on_wall && judge(held) == seg::SectionStop::none) {
             if (held_in_a_row == 0) anchor = prev, anchor_area = prev_area;
             f = std::move(held);
-            why.clear();
+            stop = seg::SectionStop::none;
             ++held_in_a_row;
             held_k.push_back(k);
           }
-        } else if (why.empty()) {
+        } else if (stop == seg::SectionStop::none) {
           held_in_a_row = 0;
           anchor.clear();
         }
-        if (!why.empty()) {
-          note = why;
+        if (stop != seg::SectionStop::none) {
+          note = seg::stop_note(stop, k);
           return;
         }
         acc.push_back({k, f.pts});
