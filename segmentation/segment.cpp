@@ -19,6 +19,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -415,7 +416,16 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   };
   // One segmentation with the window centred on `mu` (refined on the seed slice when
   // `refine_on_seed_slice`).
-  auto attempt = [&](double mu, bool refine_on_seed_slice) {
+  // Each attempt runs the whole two-direction propagation; their count and time by kind (the
+  // seed's slice, starts slid off it, starts for a longer organ, recentred windows) go into the
+  // organ's notes, so that the retries' cost is seen.
+  struct AttemptCost {
+    int count = 0;
+    double seconds = 0;
+  };
+  std::map<std::string, AttemptCost> costs;
+  std::string attempt_kind = "at the seed";
+  auto attempt_body = [&](double mu, bool refine_on_seed_slice) {
     auto window = [&](double m) { return std::pair{m - p.region_below_hu, m + p.region_above_hu}; };
     auto [lo, hi] = window(mu);
     Fit f0 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, p.region_open_mm);
@@ -627,6 +637,17 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     at.mu = mu;
     return at;
   };
+  auto attempt = [&](double mu, bool refine_on_seed_slice) {
+    const auto t0 = std::chrono::steady_clock::now();
+    AttemptCost& cost = costs[attempt_kind];
+    ++cost.count;
+    struct Timer {
+      AttemptCost& cost;
+      std::chrono::steady_clock::time_point t0;
+      ~Timer() { cost.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); }
+    } timer{cost, t0};
+    return attempt_body(mu, refine_on_seed_slice);
+  };
   // A seed in a section too small to fit (a neck or a fundus tip a few pixels across, blurred
   // with the liver around it) starts from the nearest slice within seed_slide_mm where the
   // section at the seed's position fits; propagation then comes back through the seed's slice.
@@ -641,6 +662,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
       if (k0 < 0 || k0 >= K) continue;
       const double m = d == 0 ? seed_med : hu_at_seed(k0);
       if (!seed_like(m)) continue;
+      attempt_kind = d == 0 ? "at the seed" : "slid off the seed's slice";
       try {
         at = attempt(m, true);
         fitted = true;
@@ -652,6 +674,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     if (fitted) break;
     if (d >= slide) {
       k0 = k_seed;
+      attempt_kind = "at the seed";
       at = attempt(seed_med, true);  // reports why the seed's own slice fails
       break;
     }
@@ -674,6 +697,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         if (k0 < 0 || k0 >= K) continue;
         const double m = hu_at_seed(k0);
         if (!seed_like(m)) continue;
+        attempt_kind = "for a longer organ";
         try {
           Attempt other = attempt(m, true);
           if (extent_mm(other) > extent_mm(at)) at = std::move(other), k_best = k0;
@@ -706,6 +730,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
       std::nth_element(v.begin(), mid, v.end());
       const double m3 = *mid;
       if (seed_like(m3) && std::abs(m3 - at.mu) > 1.5) {
+        attempt_kind = "recentred window";
         try {
           Attempt second = attempt(m3, false);
           // A window a few HU away changes the outline a little; a second pass that loses a fifth
@@ -745,6 +770,19 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   if (k0 != k_seed)
     out.notes.push_back("started at slice " + std::to_string(k0) + ", " + std::to_string(std::llabs(k0 - k_seed)) +
                         " from the seed's: " + start_note);
+  std::string cost_note;
+  double total_s = 0;
+  int total = 0;
+  for (const char* kind : {"at the seed", "slid off the seed's slice", "for a longer organ", "recentred window"})
+    if (const auto it = costs.find(kind); it != costs.end()) {
+      char b[96];
+      std::snprintf(b, sizeof b, "%s%d %s (%.2f s)", cost_note.empty() ? "" : ", ", it->second.count, kind, it->second.seconds);
+      cost_note += b;
+      total += it->second.count, total_s += it->second.seconds;
+    }
+  char b[64];
+  std::snprintf(b, sizeof b, "%d propagation attempt%s, %.2f s: ", total, total == 1 ? "" : "s", total_s);
+  out.notes.push_back(b + cost_note);
   return out;
 }
 
