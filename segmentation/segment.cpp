@@ -25,6 +25,7 @@
 #include <cstdlib>
 #include <map>
 #include <numeric>
+#include <optional>
 
 namespace organsmith {
 
@@ -304,6 +305,27 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
   return fit;
 }
 
+/// The continuity hold, a named step of seeded propagation: a slice whose section leaked (a wall
+/// that noise or partial volume hides, the duodenum beside the organ on a thick slice) is fitted
+/// again with the pressure held within continuity_margin_mm + continuity_slope × the slice
+/// spacing of the previous section, moved by the organ's drift (`moved_previous`). The held
+/// section is offered only where it rests on the organ's wall rather than on the reach's limit:
+/// at most max_pinned_fraction of it on the limit, or max_pinned_fraction_walled where its wall
+/// is seen around min_walled_edge_support of it (segmentation README, "Held sections with their
+/// wall"). Nothing when it rests on the limit; the caller still tests it like any section.
+std::optional<Fit> continuity_hold(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& moved_previous,
+                                   const OrganPreset& p, double lo, double hi, double open_mm, double slice_mm) {
+  Reach reach;
+  reach.around = moved_previous;
+  reach.margin_mm = p.continuity_margin_mm + p.continuity_slope * slice_mm;
+  Fit held = fit_slice(c, k, scaled(reach.around, 0.7), p, lo, hi, p.roi_margin_mm, open_mm, &reach);
+  const double pinned = pinned_fraction(held.pts, reach, std::max(c.sx, c.sy));
+  const bool rests_on_wall = pinned <= p.max_pinned_fraction ||
+                             (pinned <= p.max_pinned_fraction_walled && held.edge_support >= p.min_walled_edge_support);
+  if (!rests_on_wall) return std::nullopt;
+  return held;
+}
+
 seg::Point2 to_slice_mm(const SliceCtx& c, const Eigen::Vector3d& ijk) { return {ijk.x() * c.sx, ijk.y() * c.sy}; }
 
 Contour to_contour(const Volume& v, std::int64_t k, const std::vector<Point2>& pts) {
@@ -548,24 +570,13 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
         };
         seg::SectionStop stop = judge(f);
         if (seg::is_leak(stop) && p.continuity_margin_mm > 0 && held_in_a_row < p.max_held_in_a_row) {
-          // A leak through a wall that noise or partial volume hides (duodenum beside the organ on a
-          // thick slice) need not end the organ: the slice is fitted again with the pressure held
-          // within a margin of the previous section, moved by the organ's drift, and the organ
-          // goes on if that section passes every test.
-          Reach reach;
-          reach.around = moved_prev;
-          reach.margin_mm = p.continuity_margin_mm + p.continuity_slope * g.spacing_mm.z();
-          Fit held = fit_slice(c, k, scaled(reach.around, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area), &reach);
-          const double pinned = pinned_fraction(held.pts, reach, std::max(c.sx, c.sy));
-          // A held section with its wall seen around most of it continues the organ though more
-          // of it rests on the limit: a neighbour with no wall between (duodenum against the
-          // neck) holds one side; past the organ's end the held contour fills the reach over
-          // tissue with little wall (segmentation README, "Held sections with their wall").
-          const bool rests_on_wall = pinned <= p.max_pinned_fraction ||
-                                     (pinned <= p.max_pinned_fraction_walled && held.edge_support >= p.min_walled_edge_support);
-          if (rests_on_wall && judge(held) == seg::SectionStop::none) {
+          // A leak need not end the organ: the continuity hold fits the slice again within reach
+          // of the previous section, and the organ goes on if that section passes every rule.
+          std::optional<Fit> held =
+              continuity_hold(c, k, moved_prev, p, lo, hi, open_for(prev_area), g.spacing_mm.z());
+          if (held && judge(*held) == seg::SectionStop::none) {
             if (held_in_a_row == 0) anchor = prev, anchor_area = prev_area;
-            f = std::move(held);
+            f = std::move(*held);
             stop = seg::SectionStop::none;
             ++held_in_a_row;
             held_k.push_back(k);
