@@ -305,6 +305,50 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
   return fit;
 }
 
+/// The opening radius for a section of `area_mm2`: a fraction of the organ's equivalent radius
+/// (at least region_open_mm), so that necks through which the snake could leak into a
+/// neighbour of similar HU (duodenum, bowel) are cut at any voxel size while the organ survives.
+double opening_for(const OrganPreset& p, double area_mm2) {
+  return std::max(p.region_open_mm, p.region_open_fraction * std::sqrt(area_mm2 / M_PI));
+}
+
+/// The start section, a named step of seeded propagation: the snake from a small circle at the
+/// seed `s` on slice k0 in the window [mu − region_below_hu, mu + region_above_hu]; with `refine`,
+/// fitted once more with the window centred on the section's own median (the organ's mean is
+/// better estimated over its cross-section than around the seed) where that median is seed-like
+/// and 2 HU or more away; then opened for its own size (opening_for) until its area settles
+/// (two passes at most; an opening that removes the organ keeps the last fit). Returns the section
+/// and the window it was fitted in.
+struct StartSection {
+  Fit fit;
+  double mu = 0, lo = 0, hi = 0;
+};
+StartSection start_section(const SliceCtx& c, std::int64_t k0, Point2 s, const OrganPreset& p, double mu, bool refine,
+                           double seed_margin_mm) {
+  StartSection st;
+  auto fit_at = [&](double open_mm) {
+    return fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, st.lo, st.hi, seed_margin_mm, open_mm);
+  };
+  st.mu = mu, st.lo = mu - p.region_below_hu, st.hi = mu + p.region_above_hu;
+  Fit f0 = fit_at(p.region_open_mm);
+  if (f0.area_mm2 >= p.min_area_mm2) {
+    const double m2 = median_inside(c, k0, f0.pts);
+    if (refine && m2 >= p.seed_hu_lo && m2 <= p.seed_hu_hi && std::abs(m2 - mu) > 2.0) {
+      st.mu = m2, st.lo = m2 - p.region_below_hu, st.hi = m2 + p.region_above_hu;
+      f0 = fit_at(p.region_open_mm);
+    }
+  }
+  for (int pass = 0; pass < 2 && f0.area_mm2 >= p.min_area_mm2; ++pass) {
+    Fit f1 = fit_at(opening_for(p, f0.area_mm2));
+    if (f1.area_mm2 < p.min_area_mm2) break;
+    const bool same = std::abs(f1.area_mm2 - f0.area_mm2) < 0.02 * f0.area_mm2;
+    f0 = std::move(f1);
+    if (same) break;
+  }
+  st.fit = std::move(f0);
+  return st;
+}
+
 /// The continuity hold, a named step of seeded propagation: a slice whose section leaked (a wall
 /// that noise or partial volume hides, the duodenum beside the organ on a thick slice) is fitted
 /// again with the pressure held within continuity_margin_mm + continuity_slope × the slice
@@ -422,12 +466,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
                             "place the seed inside the " + p.organ + " (not in air, fat, bone or a neighbouring organ)");
   }
   const double seed_margin = std::max(p.roi_margin_mm, std::sqrt(p.max_area_mm2 / M_PI) + 10.0);
-  // The opening radius scales with the organ's cross-section (a fraction of its equivalent
-  // radius), so that necks through which the snake could leak into a neighbour of similar HU
-  // (duodenum, bowel) are cut at any voxel size while the organ itself survives.
-  auto open_for = [&](double area_mm2) {
-    return std::max(p.region_open_mm, p.region_open_fraction * std::sqrt(area_mm2 / M_PI));
-  };
+  auto open_for = [&](double area_mm2) { return opening_for(p, area_mm2); };
   const std::int64_t K = g.size_vox[2];
   std::atomic<int> done{0};
   struct Attempt {
@@ -448,26 +487,10 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   std::map<std::string, AttemptCost> costs;
   std::string attempt_kind = "at the seed";
   auto attempt_body = [&](double mu, bool refine_on_seed_slice) {
-    auto window = [&](double m) { return std::pair{m - p.region_below_hu, m + p.region_above_hu}; };
-    auto [lo, hi] = window(mu);
-    Fit f0 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, p.region_open_mm);
-    // The organ's mean is better estimated over its whole cross-section than around the seed;
-    // refit once with the window centred on it.
-    if (f0.area_mm2 >= p.min_area_mm2) {
-      const double m2 = median_inside(c, k0, f0.pts);
-      if (refine_on_seed_slice && seed_like(m2) && std::abs(m2 - mu) > 2.0) {
-        mu = m2;
-        std::tie(lo, hi) = window(mu);
-        f0 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, p.region_open_mm);
-      }
-    }
-    for (int pass = 0; pass < 2 && f0.area_mm2 >= p.min_area_mm2; ++pass) {
-      Fit f1 = fit_slice(c, k0, seg::circle(s, p.start_radius_mm, 16), p, lo, hi, seed_margin, open_for(f0.area_mm2));
-      if (f1.area_mm2 < p.min_area_mm2) break;  // the opening removed the organ itself: keep the last fit
-      const bool same = std::abs(f1.area_mm2 - f0.area_mm2) < 0.02 * f0.area_mm2;
-      f0 = std::move(f1);
-      if (same) break;
-    }
+    StartSection start = start_section(c, k0, s, p, mu, refine_on_seed_slice, seed_margin);
+    mu = start.mu;
+    const double lo = start.lo, hi = start.hi;
+    const Fit f0 = std::move(start.fit);
     if (f0.area_mm2 < p.min_area_mm2 || f0.area_mm2 > p.max_area_mm2) {
       char b[256];
       std::snprintf(b, sizeof b, "%s not found at seed %s: the contour %s (%.0f mm², expected %.0f–%.0f mm²)",
