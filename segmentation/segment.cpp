@@ -305,6 +305,27 @@ Fit fit_slice(const SliceCtx& c, std::int64_t k, const std::vector<Point2>& init
   return fit;
 }
 
+/// The preset adapted to the image's noise, a named step of the seeded driver (`noise_hu`: the
+/// noise measured around the seed, slice_noise_hu).
+void adapt_to_noise(OrganPreset& p, const SliceCtx& c, double noise_hu) {
+  // Smoothing before the region test grows with the image's noise (a Gaussian of σ pixels leaves
+  // noise / (2√π σ) of white noise) until what is left is below region_noise_hu, so that the
+  // pressure's sign is the tissue's and not the noise's, at any pixel size and dose.
+  if (p.region_noise_hu > 0 && noise_hu > 0)
+    p.region_sigma_px = std::max(p.region_sigma_px,
+                                 std::min(noise_hu / (2.0 * std::sqrt(M_PI) * p.region_noise_hu),
+                                          p.region_noise_max_sigma_mm / std::min(c.sx, c.sy)));
+  // Where that smoothing is capped (coarse pixels, a noisy scan) noise is left; the window must
+  // then be wider than it, or the organ's own pixels fall outside by noise alone and the balloon
+  // turns inwards. At 2.33 σ of what is left, one inside pixel in a hundred does (one-sided).
+  if (noise_hu > 0) {
+    const double sigma_px = region_sigma_mm(p, c) / std::min(c.sx, c.sy);
+    const double left_hu = noise_hu / (2.0 * std::sqrt(M_PI) * std::max(sigma_px, 0.5));
+    p.region_above_hu = std::max(p.region_above_hu, 2.33 * left_hu);
+    p.region_below_hu = std::max(p.region_below_hu, 2.33 * left_hu);
+  }
+}
+
 /// The opening radius for a section of `area_mm2`: a fraction of the organ's equivalent radius
 /// (at least region_open_mm), so that necks through which the snake could leak into a
 /// neighbour of similar HU (duodenum, bowel) are cut at any voxel size while the organ survives.
@@ -390,6 +411,20 @@ struct SliceContour {
   std::vector<Point2> pts;
 };
 
+/// The median HU over every section found (the pixels inside the contours): the centre of the
+/// recentred window; nothing when the sections hold no pixel.
+std::optional<double> sections_median_hu(const Volume& vol, const SliceCtx& c, const std::vector<SliceContour>& sections) {
+  std::vector<float> v;
+  for (const auto& sc : sections) {
+    const float* sl = vol.slice(sc.k);
+    seg::rasterise(to_px(c, sc.pts), c.W, c.H, [&](int x, int y) { v.push_back(sl[std::size_t(y) * c.W + x]); });
+  }
+  if (v.empty()) return std::nullopt;
+  auto mid = v.begin() + std::ptrdiff_t(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return double(*mid);
+}
+
 /// Noise of slice k in a square of half-side `half_mm` around `centre` (slice mm): the robust
 /// (median absolute) spread of differences between horizontal neighbours in soft tissue, ÷ √2.
 /// Anatomy adds little: most neighbour pairs lie inside one tissue.
@@ -436,23 +471,8 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
                             p.organ + " seed " + fmt_mm(seed_lps) + " lies outside the image",
                             "give a seed inside the image (see `organsmith info` for its extent)");
   const Point2 s = to_slice_mm(c, ijk);
-  // Smoothing before the region test grows with the image's noise (a Gaussian of σ pixels leaves
-  // noise / (2√π σ) of white noise) until what is left is below region_noise_hu, so that the
-  // pressure's sign is the tissue's and not the noise's, at any pixel size and dose.
   const double noise_hu = slice_noise_hu(c, k0, s, 40.0);
-  if (p.region_noise_hu > 0 && noise_hu > 0)
-    p.region_sigma_px = std::max(p.region_sigma_px,
-                                 std::min(noise_hu / (2.0 * std::sqrt(M_PI) * p.region_noise_hu),
-                                          p.region_noise_max_sigma_mm / std::min(c.sx, c.sy)));
-  // Where that smoothing is capped (coarse pixels, a noisy scan) noise is left; the window must
-  // then be wider than it, or the organ's own pixels fall outside by noise alone and the balloon
-  // turns inwards. At 2.33 σ of what is left, one inside pixel in a hundred does (one-sided).
-  if (noise_hu > 0) {
-    const double sigma_px = region_sigma_mm(p, c) / std::min(c.sx, c.sy);
-    const double left_hu = noise_hu / (2.0 * std::sqrt(M_PI) * std::max(sigma_px, 0.5));
-    p.region_above_hu = std::max(p.region_above_hu, 2.33 * left_hu);
-    p.region_below_hu = std::max(p.region_below_hu, 2.33 * left_hu);
-  }
+  adapt_to_noise(p, c, noise_hu);
   // What the seed's neighbourhood looks like decides the organ's window: the median HU around
   // the seed's position on slice k, and whether it lies in the organ's seed range.
   auto hu_at_seed = [&](std::int64_t k) { return median_inside(c, k, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24)); };
@@ -754,15 +774,8 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   // until the centre moves by at most 1.5 HU (three passes at most).
   for (int recentre = 0; recentre < 3; ++recentre) {
     bool moved = false;
-    std::vector<float> v;
-    for (const auto& sc : at.all) {
-      const float* sl = vol.slice(sc.k);
-      seg::rasterise(to_px(c, sc.pts), c.W, c.H, [&](int x, int y) { v.push_back(sl[std::size_t(y) * c.W + x]); });
-    }
-    if (!v.empty()) {
-      auto mid = v.begin() + std::ptrdiff_t(v.size() / 2);
-      std::nth_element(v.begin(), mid, v.end());
-      const double m3 = *mid;
+    if (const std::optional<double> median = sections_median_hu(vol, c, at.all)) {
+      const double m3 = *median;
       if (seed_like(m3) && std::abs(m3 - at.mu) > 1.5) {
         attempt_kind = "recentred window";
         try {
