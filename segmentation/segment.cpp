@@ -1283,10 +1283,7 @@ std::string contours_json(const OrganSegmentation& organ) {
 
 std::optional<ContourStack> contours_from_json(const std::string& text, const std::string& organ, std::string* why) {
   const nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
-  if (!j.is_object() || !j.contains("contours") || !j["contours"].is_array()) {
-    if (why) *why = "not a JSON object with a \"contours\" array";
-    return std::nullopt;
-  }
+  if (!j.is_object() || !j.contains("contours") || !j["contours"].is_array()) return std::nullopt;
   ContourStack stack;
   stack.organ = j.value("organ", organ);
   try {

@@ -75,7 +75,8 @@ SegmentationResult segment_organs(const Volume& volume, const std::vector<OrganR
 /// [{"slice_k", "points_lps_mm": [[x, y, z], …]}]}.
 std::string contours_json(const OrganSegmentation& organ);
 /// The reader of that text (contours_<organ>.json): the stack as the text holds it; nothing when
-/// the text is not JSON or not in that form (`why`, when given, then says what is wrong).
+/// the text is not JSON or not in that form (`why`, when given, says what is wrong with a
+/// contour of an otherwise well-formed file).
 std::optional<ContourStack> contours_from_json(const std::string& text, const std::string& organ,
                                                std::string* why = nullptr);
 

@@ -1,7 +1,9 @@
 // `guide` (guidance paths of a run's output directory: trachea centreline and incision,
 // gallbladder dissection, or a user's recorded path) and `haptics` (replays a scripted trajectory
 // through the 1 kHz force loop and reports path following, forces and loop timing).
-// The science is in physics/haptics/HAPTICS.md.
+// The science is in physics/haptics/HAPTICS.md. Just over 400 lines for a reason: the two
+// commands share their readers of a run (labels, paths, laws) and their flags' checks; split,
+// each half would carry a copy of them.
 
 #include "core/errors.h"
 #include "core/file_io.h"
@@ -177,14 +179,14 @@ int run_indent(const HapticsFlags& f) {
   return 0;
 }
 
-/// The calibrated law of an organ region, from OUT_DIR/materials.json (the attach stage), else the
-/// built-in preset of that region.
-/// The organ region's law as a stress lookup table (the same law the preview and snapshots use).
-StressTable region_table(const fs::path& out, const OrganInfo& organ, const OrganRegistry& registry) {
-  const OutputRegionLaw law = output_region_law(out, organ.haptic_region, registry);
+/// The organ region's law (OUT_DIR/materials.json as `materials` holds it, else the built-in
+/// preset) as a stress lookup table (the same law the preview and snapshots use).
+StressTable region_table(const MaterialsFile* materials, const fs::path& out, const OrganInfo& organ,
+                         const OrganRegistry& registry) {
+  const fs::path file = OutputLayout{out}.materials();
+  const OutputRegionLaw law = output_region_law(materials, organ.haptic_region, registry, file);
   if (!law.from_output)
-    spdlog::warn("haptics: {} not in {}; using the built-in preset {}", organ.haptic_region,
-                 OutputLayout{out}.materials().string(), law.preset_id);
+    spdlog::warn("haptics: {} not in {}; using the built-in preset {}", organ.haptic_region, file.string(), law.preset_id);
   return StressTable::from_material(law.material, law.options, organ.haptic_max_strain);
 }
 
@@ -237,6 +239,7 @@ int run_haptics(HapticsFlags f) {
   // solver file exists); the others through their surfaces and laws.
   std::unique_ptr<RealtimeOrgan> fe = fe_for_haptics(out, f.fe, f.contact.tool_radius_mm, f.fe_elements == "quadratic");
   const std::string fe_organ = fe ? fe->fe.organ : "none";
+  const std::optional<MaterialsFile> materials = read_materials(out);
   for (const OrganInfo& o : registry.organs) {
     if (o.haptic_surface.empty() || labels.count(o.label) == 0 || o.name == fe_organ) continue;
     const fs::path sf = OutputLayout{out}.surface(o.name, o.haptic_surface, "stl");
@@ -244,7 +247,7 @@ int run_haptics(HapticsFlags f) {
       throw InputError(ExitCode::input_not_found, "missing organ surface " + o.haptic_surface + ".stl", sf,
                        "run the mesh stage (`organsmith run`) first");
     surfaces.push_back(read_stl(sf));
-    tables.push_back(region_table(out, o, registry));
+    tables.push_back(region_table(materials ? &*materials : nullptr, out, o, registry));
     organs.push_back({{"organ", o.name}, {"surface", fs::relative(sf, out).generic_string()}, {"law_region", o.haptic_region},
                       {"triangles", surfaces.back().triangles.size()}});
   }

@@ -186,6 +186,7 @@ int cmd_preview(const PreviewFlags& f) {
     haptics.tissue_fixed_nodes = fe->fe.fixed_nodes;
     haptics.tissue_organ = fe_organ;
   }
+  const std::optional<MaterialsFile> materials = read_materials(out);
   for (const auto& organ : registry.organs) {
     if (organ.haptic_surface.empty() || organ.name == fe_organ) continue;
     int best = -1;
@@ -195,7 +196,8 @@ int cmd_preview(const PreviewFlags& f) {
       if (s.name == organ.haptic_surface || best < 0) best = int(i);
     }
     if (best < 0) continue;
-    const OutputRegionLaw law = output_region_law(out, organ.haptic_region, registry);
+    const OutputRegionLaw law =
+        output_region_law(materials ? &*materials : nullptr, organ.haptic_region, registry, OutputLayout{out}.materials());
     surfaces.push_back(os.scene.surfaces[best].mesh);
     tables.push_back(physics::StressTable::from_material(law.material, law.options, organ.haptic_max_strain));
     haptics.contact_scene_surfaces.push_back(best);

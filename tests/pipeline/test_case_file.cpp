@@ -189,6 +189,9 @@ TEST(CaseFile, StageOptionTyposWrongTypesAndRangesAreErrorsWithLineKeyAndWhatIsA
   EXPECT_TRUE(has(e, "'step'") && has(e, "feb")) << e;
   e = case_error("[stages.mesh]\nquality_gate = \"strict\"\n");
   EXPECT_TRUE(has(e, "report, enforce")) << e;
+  // A case's guide paths are the registry's.
+  e = case_error("[stages.guide]\npaths = [\"trachea_dissection\"]\n");
+  EXPECT_TRUE(has(e, "'trachea_dissection', which no organ of the registry has") && has(e, "trachea_incision")) << e;
   e = case_error("[stages.guide]\nring_count = 2.5\n");
   EXPECT_TRUE(has(e, "must be an integer")) << e;
   e = case_error("[stages.snapshot]\nviews = [\"organz\"]\n");
