@@ -1158,8 +1158,7 @@ OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool 
 /// outline of the largest section of the surface there. Returns the organ's voxel count.
 std::int64_t surface_from_slices(const Volume& vol, const OrganPreset& p, OrganSegmentation& o, LabelMap& labels,
                                  bool parallel) {
-  std::vector<std::uint8_t> start(labels.labels.size());
-  for (std::size_t q = 0; q < start.size(); ++q) start[q] = labels.labels[q] == o.label;
+  const seg::BoxMask start = seg::box_mask_of(labels.labels.data(), vol.grid, std::uint8_t(o.label));
   seg::Surface3dOptions so;
   so.lo_hu = o.window_lo_hu, so.hi_hu = o.window_hi_hu, so.ramp_hu = p.pressure_ramp_hu;
   so.region_sigma_mm = o.region_sigma_mm;
@@ -1173,12 +1172,19 @@ std::int64_t surface_from_slices(const Volume& vol, const OrganPreset& p, OrganS
   so.open_start_mm = p.surface3d_open_start_mm;
   so.parallel = parallel;
   const seg::Surface3dResult r = seg::evolve_surface3d(vol, start, so);
-  std::int64_t n = 0;
-  for (std::size_t q = 0; q < start.size(); ++q) {
-    if (start[q]) labels.labels[q] = 0;
-    if (r.mask[q] && labels.labels[q] == 0) labels.labels[q] = o.label, ++n;
-  }
+  // The start lies in the surface's box: the slices' voxels leave, the surface's join.
   const auto& g = vol.grid;
+  const auto& box = r.mask;
+  std::int64_t n = 0;
+  std::size_t b = 0;
+  for (std::int64_t k = 0; k < box.size_vox[2]; ++k)
+    for (std::int64_t j = 0; j < box.size_vox[1]; ++j)
+      for (std::int64_t i = 0; i < box.size_vox[0]; ++i, ++b) {
+        const std::int64_t I = box.origin_vox[0] + i, J = box.origin_vox[1] + j, K = box.origin_vox[2] + k;
+        std::uint8_t& l = labels.labels[std::size_t(g.offset(I, J, K))];
+        if (start.at(I, J, K)) l = 0;
+        if (box.inside[b] && l == 0) l = std::uint8_t(o.label), ++n;
+      }
   const int W = int(g.size_vox[0]), H = int(g.size_vox[1]);
   o.contours.contours.clear();
   for (std::int64_t k = r.first_k; k <= r.last_k; ++k) {

@@ -1,8 +1,11 @@
-// Over 400 lines: the surface's evolution and the grid tools only it uses (exact anisotropic
-// distance transform, separable Gaussian, running-sum box filter, topology clean-up) share the
-// working box and its indexing; split out, the tools would be a header of private helpers.
+// Over 400 lines: the level set's evolution is one loop whose passes (region speed, GVF
+// advection, curvature, reinitialisation, local statistics) share the working box's arrays and
+// the narrow band; its grid tools are in detail/grid3d.
 #include "segmentation/surface3d.h"
 
+#include "segmentation/detail/grid3d.h"
+
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
@@ -10,315 +13,71 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <limits>
+#include <tuple>
+#include <type_traits>
 
 namespace organsmith::seg {
-namespace {
 
-/// The working box: a sub-grid of the volume, x fastest.
-struct Box {
-  std::int64_t i0 = 0, j0 = 0, k0 = 0;
-  int nx = 0, ny = 0, nz = 0;
-  double hx = 1, hy = 1, hz = 1;
-  std::size_t size() const { return std::size_t(nx) * ny * nz; }
-  std::size_t at(int x, int y, int z) const { return (std::size_t(z) * ny + y) * nx + x; }
-};
+using detail::Box;
+using detail::Grad;
+using detail::box_sum;
+using detail::central;
+using detail::distance_sq_mm2;
+using detail::for_slices;
+using detail::gaussian;
+using detail::simple_topology;
 
-/// First element of line l along axis ax (0 = x, 1 = y, 2 = z) of an nx × ny × … grid, x fastest;
-/// len is the line's length.
-std::size_t line_start(int ax, std::size_t l, int nx, int ny, int len) {
-  if (ax == 0) return l * std::size_t(len);
-  if (ax == 1) return (l / std::size_t(nx)) * std::size_t(nx) * std::size_t(ny) + (l % std::size_t(nx));
-  return l;
+bool BoxMask::at(std::int64_t i, std::int64_t j, std::int64_t k) const {
+  i -= origin_vox[0], j -= origin_vox[1], k -= origin_vox[2];
+  if (i < 0 || j < 0 || k < 0 || i >= size_vox[0] || j >= size_vox[1] || k >= size_vox[2]) return false;
+  return inside[std::size_t(i + size_vox[0] * (j + size_vox[1] * k))] != 0;
 }
 
-template <class F>
-void for_slices(const Box& b, bool parallel, F&& f) {
-  if (parallel)
-    tbb::parallel_for(0, b.nz, [&](int z) { f(z); });
-  else
-    for (int z = 0; z < b.nz; ++z) f(z);
-}
-
-/// One-dimensional squared distance transform of `f` along a line of n samples spaced h apart.
-void edt_line(const float* f, float* d, int n, double h, std::vector<int>& v, std::vector<double>& z) {
-  constexpr double inf = std::numeric_limits<double>::infinity();
-  int k = -1;
-  v.resize(std::size_t(n));
-  z.resize(std::size_t(n) + 1);
-  for (int q = 0; q < n; ++q) {
-    if (!std::isfinite(f[q])) continue;
-    const double fq = f[q], xq = q * h;
-    while (k >= 0) {
-      const double xv = v[std::size_t(k)] * h;
-      const double s = ((fq + xq * xq) - (double(f[v[std::size_t(k)]]) + xv * xv)) / (2 * (xq - xv));
-      if (s <= z[std::size_t(k)]) {
-        --k;
-      } else {
-        ++k;
-        v[std::size_t(k)] = q;
-        z[std::size_t(k)] = s;
-        z[std::size_t(k) + 1] = inf;
-        break;
-      }
-    }
-    if (k < 0) {
-      k = 0;
-      v[0] = q;
-      z[0] = -inf;
-      z[1] = inf;
-    }
-  }
-  if (k < 0) {
-    std::fill(d, d + n, std::numeric_limits<float>::infinity());
-    return;
-  }
-  int j = 0;
-  for (int q = 0; q < n; ++q) {
-    while (z[std::size_t(j) + 1] < q * h) ++j;
-    const double dx = (q - v[std::size_t(j)]) * h;
-    d[q] = float(dx * dx + f[v[std::size_t(j)]]);
-  }
-}
-
-/// Separable Gaussian of σ mm along each axis whose σ is at least half a voxel (zero-flux borders).
-void gaussian(std::vector<float>& a, const Box& b, double sigma_mm) {
-  const std::array<double, 3> h{b.hx, b.hy, b.hz};
-  const std::array<int, 3> n{b.nx, b.ny, b.nz};
-  const std::array<std::size_t, 3> stride{1, std::size_t(b.nx), std::size_t(b.nx) * b.ny};
-  for (int ax = 0; ax < 3; ++ax) {
-    const double s = sigma_mm / h[std::size_t(ax)];
-    if (s < 0.5 || n[std::size_t(ax)] < 2) continue;
-    const int r = int(std::ceil(3 * s));
-    std::vector<double> w(std::size_t(2 * r + 1));
-    double sum = 0;
-    for (int t = -r; t <= r; ++t) sum += w[std::size_t(t + r)] = std::exp(-0.5 * t * t / (s * s));
-    for (auto& x : w) x /= sum;
-    const int len = n[std::size_t(ax)];
-    const std::size_t st = stride[std::size_t(ax)];
-    const std::size_t lines = a.size() / std::size_t(len);
-    std::vector<float> out(a.size());
-    tbb::parallel_for(std::size_t(0), lines, [&](std::size_t l) {
-      // line l: its first element
-      const std::size_t base = line_start(ax, l, b.nx, b.ny, len);
-      for (int p = 0; p < len; ++p) {
-        double acc = 0;
-        for (int t = -r; t <= r; ++t) acc += w[std::size_t(t + r)] * a[base + std::size_t(std::clamp(p + t, 0, len - 1)) * st];
-        out[base + std::size_t(p) * st] = float(acc);
-      }
-    });
-    a.swap(out);
-  }
-}
-
-/// Sums of `a` over the (2rx+1)(2ry+1)(2rz+1) window around every voxel, truncated at the box's
-/// faces (running sums along each axis).
-std::vector<float> box_sum(const std::vector<float>& a, const Box& b, int rx, int ry, int rz) {
-  std::vector<float> cur = a, nxt(a.size());
-  const int n[3] = {b.nx, b.ny, b.nz}, r[3] = {rx, ry, rz};
-  const std::size_t stride[3] = {1, std::size_t(b.nx), std::size_t(b.nx) * b.ny};
-  for (int ax = 0; ax < 3; ++ax) {
-    const int len = n[ax], rr = r[ax];
-    if (rr <= 0 || len < 2) continue;
-    const std::size_t lines = a.size() / std::size_t(len);
-    tbb::parallel_for(std::size_t(0), lines, [&](std::size_t l) {
-      const std::size_t base = line_start(ax, l, b.nx, b.ny, len);
-      double run = 0;
-      for (int q = 0; q <= std::min(rr, len - 1); ++q) run += cur[base + std::size_t(q) * stride[ax]];
-      for (int p = 0; p < len; ++p) {
-        nxt[base + std::size_t(p) * stride[ax]] = float(run);
-        const int add = p + rr + 1, drop = p - rr;
-        if (add < len) run += cur[base + std::size_t(add) * stride[ax]];
-        if (drop >= 0) run -= cur[base + std::size_t(drop) * stride[ax]];
-      }
-    });
-    cur.swap(nxt);
-  }
-  return cur;
-}
-
-struct Grad {
-  double x, y, z;
-};
-
-/// Central differences in mm (one-sided at the box's faces).
-Grad central(const std::vector<float>& a, const Box& b, int x, int y, int z) {
-  auto d = [&](int lo, int hi, int p, double h, auto idx) {
-    const int m = std::max(p - 1, 0), q = std::min(p + 1, hi);
-    if (q == m) return 0.0;
-    (void)lo;
-    return (double(a[idx(q)]) - double(a[idx(m)])) / ((q - m) * h);
-  };
-  return {d(0, b.nx - 1, x, b.hx, [&](int v) { return b.at(v, y, z); }),
-          d(0, b.ny - 1, y, b.hy, [&](int v) { return b.at(x, v, z); }),
-          d(0, b.nz - 1, z, b.hz, [&](int v) { return b.at(x, y, v); })};
-}
-
-/// Connected (6-neighbour) part of `in` that touches `seed`, with enclosed background filled.
-std::vector<std::uint8_t> simple_topology(const std::vector<std::uint8_t>& in, const std::vector<std::uint8_t>& seed,
-                                          const Box& b) {
-  const std::size_t n = b.size();
-  std::vector<std::uint8_t> out(n, 0);
-  std::vector<std::size_t> stack;
-  auto push_nb = [&](std::size_t p, auto&& ok, std::vector<std::uint8_t>& mark) {
-    const int x = int(p % b.nx), y = int((p / b.nx) % b.ny), z = int(p / (std::size_t(b.nx) * b.ny));
-    const int dx[6] = {-1, 1, 0, 0, 0, 0}, dy[6] = {0, 0, -1, 1, 0, 0}, dz[6] = {0, 0, 0, 0, -1, 1};
-    for (int e = 0; e < 6; ++e) {
-      const int X = x + dx[e], Y = y + dy[e], Z = z + dz[e];
-      if (X < 0 || Y < 0 || Z < 0 || X >= b.nx || Y >= b.ny || Z >= b.nz) continue;
-      const std::size_t q = b.at(X, Y, Z);
-      if (!mark[q] && ok(q)) mark[q] = 1, stack.push_back(q);
-    }
-  };
-  for (std::size_t p = 0; p < n; ++p)
-    if (seed[p] && in[p] && !out[p]) out[p] = 1, stack.push_back(p);
-  while (!stack.empty()) {
-    const std::size_t p = stack.back();
-    stack.pop_back();
-    push_nb(p, [&](std::size_t q) { return in[q] != 0; }, out);
-  }
-  // Background reachable from the box's faces stays background; the rest is a cavity.
-  std::vector<std::uint8_t> outside(n, 0);
-  for (int z = 0; z < b.nz; ++z)
-    for (int y = 0; y < b.ny; ++y)
-      for (int x = 0; x < b.nx; ++x) {
-        if (x > 0 && y > 0 && z > 0 && x < b.nx - 1 && y < b.ny - 1 && z < b.nz - 1) continue;
-        const std::size_t p = b.at(x, y, z);
-        if (!out[p] && !outside[p]) outside[p] = 1, stack.push_back(p);
-      }
-  while (!stack.empty()) {
-    const std::size_t p = stack.back();
-    stack.pop_back();
-    push_nb(p, [&](std::size_t q) { return out[q] == 0; }, outside);
-  }
-  for (std::size_t p = 0; p < n; ++p) out[p] = !outside[p];
-  // No hole through a slice either: each slice's background not reachable in-plane from the
-  // slice's border joins (a section is a filled outline).
-  std::vector<std::uint8_t> reach(std::size_t(b.nx) * b.ny);
-  std::vector<std::size_t> st2;
-  for (int z = 0; z < b.nz; ++z) {
-    std::fill(reach.begin(), reach.end(), 0);
-    auto at2 = [&](int x, int y) { return std::size_t(y) * b.nx + x; };
-    for (int y = 0; y < b.ny; ++y)
-      for (int x = 0; x < b.nx; ++x)
-        if ((x == 0 || y == 0 || x == b.nx - 1 || y == b.ny - 1) && !out[b.at(x, y, z)]) reach[at2(x, y)] = 1, st2.push_back(at2(x, y));
-    while (!st2.empty()) {
-      const std::size_t p = st2.back();
-      st2.pop_back();
-      const int x = int(p % b.nx), y = int(p / b.nx);
-      const int dx[4] = {-1, 1, 0, 0}, dy[4] = {0, 0, -1, 1};
-      for (int e = 0; e < 4; ++e) {
-        const int X = x + dx[e], Y = y + dy[e];
-        if (X < 0 || Y < 0 || X >= b.nx || Y >= b.ny) continue;
-        const std::size_t q = at2(X, Y);
-        if (!reach[q] && !out[b.at(X, Y, z)]) reach[q] = 1, st2.push_back(q);
-      }
-    }
-    for (int y = 0; y < b.ny; ++y)
-      for (int x = 0; x < b.nx; ++x)
-        if (!reach[at2(x, y)]) out[b.at(x, y, z)] = 1;
-  }
+std::vector<std::uint8_t> BoxMask::on_grid(const ImageGrid& g) const {
+  std::vector<std::uint8_t> out(std::size_t(g.voxel_count()), 0);
+  for (std::int64_t k = 0; k < size_vox[2]; ++k)
+    for (std::int64_t j = 0; j < size_vox[1]; ++j)
+      std::memcpy(out.data() + g.offset(origin_vox[0], origin_vox[1] + j, origin_vox[2] + k),
+                  inside.data() + size_vox[0] * (j + size_vox[1] * k), std::size_t(size_vox[0]));
   return out;
 }
 
-}  // namespace
-
-std::vector<float> distance_sq_mm2(const std::vector<std::uint8_t>& feature, int nx, int ny, int nz, double hx,
-                                   double hy, double hz) {
-  const std::size_t n = std::size_t(nx) * ny * nz;
-  std::vector<float> d(n);
-  for (std::size_t p = 0; p < n; ++p) d[p] = feature[p] ? 0.f : std::numeric_limits<float>::infinity();
-  const int dims[3] = {nx, ny, nz};
-  const double hs[3] = {hx, hy, hz};
-  const std::size_t stride[3] = {1, std::size_t(nx), std::size_t(nx) * ny};
-  for (int ax = 0; ax < 3; ++ax) {
-    const int len = dims[ax];
-    const std::size_t lines = n / std::size_t(len);
-    tbb::parallel_for(std::size_t(0), lines, [&](std::size_t l) {
-      const std::size_t base = line_start(ax, l, nx, ny, len);
-      std::vector<float> f(static_cast<std::size_t>(len)), o(static_cast<std::size_t>(len));
-      std::vector<int> v;
-      std::vector<double> z;
-      for (int p = 0; p < len; ++p) f[std::size_t(p)] = d[base + std::size_t(p) * stride[ax]];
-      edt_line(f.data(), o.data(), len, hs[ax], v, z);
-      for (int p = 0; p < len; ++p) d[base + std::size_t(p) * stride[ax]] = o[std::size_t(p)];
-    });
-  }
-  return d;
-}
-
-Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8_t>& start,
-                                 const Surface3dOptions& o) {
-  const auto t0 = std::chrono::steady_clock::now();
-  Surface3dResult res;
-  const auto& g = vol.grid;
+BoxMask box_mask_of(const std::uint8_t* values, const ImageGrid& g, std::uint8_t value) {
   const std::int64_t NX = g.size_vox[0], NY = g.size_vox[1], NZ = g.size_vox[2];
-  res.mask.assign(std::size_t(g.voxel_count()), 0);
-  // The start's box, grown by the margin.
   std::int64_t lo[3] = {NX, NY, NZ}, hi[3] = {-1, -1, -1};
   for (std::int64_t k = 0; k < NZ; ++k)
-    for (std::int64_t j = 0; j < NY; ++j)
-      for (std::int64_t i = 0; i < NX; ++i)
-        if (start[std::size_t(g.offset(i, j, k))]) {
-          lo[0] = std::min(lo[0], i), hi[0] = std::max(hi[0], i);
-          lo[1] = std::min(lo[1], j), hi[1] = std::max(hi[1], j);
-          lo[2] = std::min(lo[2], k), hi[2] = std::max(hi[2], k);
-          ++res.start_voxels;
-        }
-  if (res.start_voxels == 0) return res;
-  Box b;
-  b.hx = g.spacing_mm.x(), b.hy = g.spacing_mm.y(), b.hz = g.spacing_mm.z();
-  const double h[3] = {b.hx, b.hy, b.hz};
-  const std::int64_t N[3] = {NX, NY, NZ};
-  std::int64_t b0[3], b1[3];
-  for (int a = 0; a < 3; ++a) {
-    std::int64_t m = std::int64_t(std::ceil(o.margin_mm / h[a]));
-    if (a == 2) m = std::max<std::int64_t>(m, 2);
-    b0[a] = std::max<std::int64_t>(0, lo[a] - m);
-    b1[a] = std::min<std::int64_t>(N[a] - 1, hi[a] + m);
-  }
-  b.i0 = b0[0], b.j0 = b0[1], b.k0 = b0[2];
-  b.nx = int(b1[0] - b0[0] + 1), b.ny = int(b1[1] - b0[1] + 1), b.nz = int(b1[2] - b0[2] + 1);
+    for (std::int64_t j = 0; j < NY; ++j) {
+      const std::uint8_t* row = values + g.offset(0, j, k);  // a row is contiguous, x fastest
+      const void* first = std::memchr(row, value, std::size_t(NX));   // (vectorised: most rows hold none)
+      if (!first) continue;
+      const void* last = memrchr(row, value, std::size_t(NX));
+      lo[0] = std::min<std::int64_t>(lo[0], static_cast<const std::uint8_t*>(first) - row);
+      hi[0] = std::max<std::int64_t>(hi[0], static_cast<const std::uint8_t*>(last) - row);
+      lo[1] = std::min(lo[1], j), hi[1] = std::max(hi[1], j);
+      lo[2] = std::min(lo[2], k), hi[2] = std::max(hi[2], k);
+    }
+  BoxMask m;
+  if (hi[0] < 0) return m;
+  for (int a = 0; a < 3; ++a) m.origin_vox[std::size_t(a)] = lo[a], m.size_vox[std::size_t(a)] = hi[a] - lo[a] + 1;
+  m.inside.resize(std::size_t(m.size_vox[0] * m.size_vox[1] * m.size_vox[2]));
+  std::size_t q = 0;
+  for (std::int64_t k = lo[2]; k <= hi[2]; ++k)
+    for (std::int64_t j = lo[1]; j <= hi[1]; ++j)
+      for (std::int64_t i = lo[0]; i <= hi[0]; ++i) m.inside[q++] = values[std::size_t(g.offset(i, j, k))] == value;
+  return m;
+}
+
+namespace {
+
+/// The GVF field (Xu & Prince) of the 3-D edge map of the box's HU, in mm, normalised to |v| ≤ 1.
+struct GvfField {
+  std::vector<float> u, v, w;
+};
+
+GvfField gvf_field(const std::vector<float>& hu, const Box& b, const Surface3dOptions& o) {
   const std::size_t n = b.size();
-  std::vector<float> hu(n);
-  std::vector<std::uint8_t> s0(n);
-  for (int z = 0; z < b.nz; ++z)
-    for (int y = 0; y < b.ny; ++y)
-      for (int x = 0; x < b.nx; ++x) {
-        const std::int64_t off = g.offset(b.i0 + x, b.j0 + y, b.k0 + z);
-        hu[b.at(x, y, z)] = vol.hu[std::size_t(off)];
-        s0[b.at(x, y, z)] = start[std::size_t(off)] ? 1 : 0;
-      }
-
-  // Region speed on the smoothed HU.
-  std::vector<float> sm = hu;
-  gaussian(sm, b, o.region_sigma_mm);
-  // The window bounds growth at half-way to the tissue beyond it (the organ's window is set a
-  // third of the way, so that the slices' snake does not leak; half-way is where a blurred wall's
-  // boundary lies, as in the slices' seating).
-  const double mid = 0.5 * (o.lo_hu + o.hi_hu);
-  const double lo_veto = mid - o.veto_widen * (mid - o.lo_hu), hi_veto = mid + o.veto_widen * (o.hi_hu - mid);
-  std::vector<float> R(n);
-  for (std::size_t p = 0; p < n; ++p)
-    R[p] = float(std::clamp(std::min(sm[p] - lo_veto, hi_veto - sm[p]) / std::max(o.ramp_hu, 1e-6), -1.0, 1.0));
-
-  // Edge stop of the outward push: g = 1 / (1 + (|∇I_σ| / k)²) on the HU smoothed like the edge
-  // map, k in HU/mm (a wall's step of ~50–100 HU over its blur of a few mm is 15–30 HU/mm: g ≈
-  // 0.1–0.3 at k = 10; noise left after smoothing is a few HU/mm: g ≈ 1 inside the organ).
-  if (o.edge_stop_hu_per_mm > 0) {
-    std::vector<float> es = hu;
-    gaussian(es, b, o.edge_sigma_mm);
-    for (int z = 0; z < b.nz; ++z)
-      for (int y = 0; y < b.ny; ++y)
-        for (int x = 0; x < b.nx; ++x) {
-          const Grad gr = central(es, b, x, y, z);
-          const double q = (gr.x * gr.x + gr.y * gr.y) / (o.edge_stop_hu_per_mm * o.edge_stop_hu_per_mm);
-          float& r = R[b.at(x, y, z)];
-          if (r > 0) r = float(r / (1 + q));
-        }
-  }
-
-  // Edge map and its GVF, in mm.
   std::vector<float> f(n);
   for (std::size_t p = 0; p < n; ++p)
     f[p] = float(std::clamp((hu[p] - o.edge_lo_hu) / (o.edge_hi_hu - o.edge_lo_hu), 0.0, 1.0));
@@ -354,21 +113,35 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
     const double lap = 2 * mu * (1 / (b.hx * b.hx) + 1 / (b.hy * b.hy) + (b.nz > 1 ? 1 / (b.hz * b.hz) : 0));
     const double dt = 1 / (lap + bmax + 1e-12);
     std::vector<float> u2(n), v2(n), w2(n);
+    const double hx2 = b.hx * b.hx, hy2 = b.hy * b.hy, hz2 = b.hz * b.hz;
+    // One explicit step of a component `a` (target `d`) along a row: x-neighbours clamped at the
+    // row's ends, the rows either side in y and z given (clamped by the caller). The interior
+    // loop has no clamps, so that the compiler vectorises it.
+    auto row_step = [&](const float* a, const float* d, const float* bbr, const float* aym, const float* ayp,
+                        const float* azm, const float* azp, float* out) {
+      auto cell = [&](int x, int xm, int xp) {
+        const double L = (a[xm] + a[xp] - 2.0 * a[x]) / hx2 + (aym[x] + ayp[x] - 2.0 * a[x]) / hy2 +
+                         (azm[x] + azp[x] - 2.0 * a[x]) / hz2;
+        out[x] = float(a[x] + dt * (mu * L - bbr[x] * (a[x] - d[x])));
+      };
+      cell(0, 0, std::min(1, b.nx - 1));
+      for (int x = 1; x < b.nx - 1; ++x) {
+        const double L = (a[x - 1] + a[x + 1] - 2.0 * a[x]) / hx2 + (aym[x] + ayp[x] - 2.0 * a[x]) / hy2 +
+                         (azm[x] + azp[x] - 2.0 * a[x]) / hz2;
+        out[x] = float(a[x] + dt * (mu * L - bbr[x] * (a[x] - d[x])));
+      }
+      if (b.nx > 1) cell(b.nx - 1, b.nx - 2, b.nx - 1);
+    };
     for (int it = 0; it < o.gvf_iterations; ++it) {
       for_slices(b, o.parallel, [&](int z) {
         const int zm = std::max(z - 1, 0), zp = std::min(z + 1, b.nz - 1);
         for (int y = 0; y < b.ny; ++y) {
           const int ym = std::max(y - 1, 0), yp = std::min(y + 1, b.ny - 1);
-          for (int x = 0; x < b.nx; ++x) {
-            const int xm = std::max(x - 1, 0), xp = std::min(x + 1, b.nx - 1);
-            const std::size_t p = b.at(x, y, z);
-            auto step = [&](const std::vector<float>& a, const std::vector<float>& d) {
-              const double L = (a[b.at(xm, y, z)] + a[b.at(xp, y, z)] - 2.0 * a[p]) / (b.hx * b.hx) +
-                               (a[b.at(x, ym, z)] + a[b.at(x, yp, z)] - 2.0 * a[p]) / (b.hy * b.hy) +
-                               (a[b.at(x, y, zm)] + a[b.at(x, y, zp)] - 2.0 * a[p]) / (b.hz * b.hz);
-              return float(a[p] + dt * (mu * L - bb[p] * (a[p] - d[p])));
-            };
-            u2[p] = step(u, fx), v2[p] = step(v, fy), w2[p] = step(w, fz);
+          const std::size_t r = b.at(0, y, z), rym = b.at(0, ym, z), ryp = b.at(0, yp, z), rzm = b.at(0, y, zm),
+                            rzp = b.at(0, y, zp);
+          for (auto [a, d, o2] : {std::tuple{&u, &fx, &u2}, std::tuple{&v, &fy, &v2}, std::tuple{&w, &fz, &w2}}) {
+            const float* A = a->data();
+            row_step(A + r, d->data() + r, bb.data() + r, A + rym, A + ryp, A + rzm, A + rzp, o2->data() + r);
           }
         }
       });
@@ -380,6 +153,85 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
     if (vmax > 0)
       for (std::size_t p = 0; p < n; ++p) u[p] = float(u[p] / vmax), v[p] = float(v[p] / vmax), w[p] = float(w[p] / vmax);
   }
+
+  return {std::move(u), std::move(v), std::move(w)};
+}
+
+}  // namespace
+
+Surface3dResult evolve_surface3d(const Volume& vol, const BoxMask& start, const Surface3dOptions& o) {
+  const auto t0 = std::chrono::steady_clock::now();
+  Surface3dResult res;
+  const auto& g = vol.grid;
+  const std::int64_t NX = g.size_vox[0], NY = g.size_vox[1], NZ = g.size_vox[2];
+  // The start's box (of its inside voxels), grown by the margin.
+  std::int64_t lo[3] = {NX, NY, NZ}, hi[3] = {-1, -1, -1};
+  for (std::int64_t k = 0; k < start.size_vox[2]; ++k)
+    for (std::int64_t j = 0; j < start.size_vox[1]; ++j)
+      for (std::int64_t i = 0; i < start.size_vox[0]; ++i)
+        if (start.inside[std::size_t(i + start.size_vox[0] * (j + start.size_vox[1] * k))]) {
+          const std::int64_t c[3] = {start.origin_vox[0] + i, start.origin_vox[1] + j, start.origin_vox[2] + k};
+          for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
+          ++res.start_voxels;
+        }
+  if (res.start_voxels == 0) return res;
+  Box b;
+  b.hx = g.spacing_mm.x(), b.hy = g.spacing_mm.y(), b.hz = g.spacing_mm.z();
+  const double h[3] = {b.hx, b.hy, b.hz};
+  const std::int64_t N[3] = {NX, NY, NZ};
+  std::int64_t b0[3], b1[3];
+  for (int a = 0; a < 3; ++a) {
+    std::int64_t m = std::int64_t(std::ceil(o.margin_mm / h[a]));
+    if (a == 2) m = std::max<std::int64_t>(m, 2);
+    b0[a] = std::max<std::int64_t>(0, lo[a] - m);
+    b1[a] = std::min<std::int64_t>(N[a] - 1, hi[a] + m);
+  }
+  b.i0 = b0[0], b.j0 = b0[1], b.k0 = b0[2];
+  b.nx = int(b1[0] - b0[0] + 1), b.ny = int(b1[1] - b0[1] + 1), b.nz = int(b1[2] - b0[2] + 1);
+  const std::size_t n = b.size();
+  std::vector<float> hu(n);
+  std::vector<std::uint8_t> s0(n);
+  for (int z = 0; z < b.nz; ++z)
+    for (int y = 0; y < b.ny; ++y)
+      for (int x = 0; x < b.nx; ++x) {
+        const std::int64_t off = g.offset(b.i0 + x, b.j0 + y, b.k0 + z);
+        hu[b.at(x, y, z)] = vol.hu[std::size_t(off)];
+        s0[b.at(x, y, z)] = start.at(b.i0 + x, b.j0 + y, b.k0 + z) ? 1 : 0;
+      }
+
+  // Region speed on the smoothed HU.
+  std::vector<float> sm = hu;
+  gaussian(sm, b, o.region_sigma_mm);
+  // The window bounds growth at half-way to the tissue beyond it (the organ's window is set a
+  // third of the way, so that the slices' snake does not leak; half-way is where a blurred wall's
+  // boundary lies, as in the slices' seating).
+  const double mid = 0.5 * (o.lo_hu + o.hi_hu);
+  const double lo_veto = mid - o.veto_widen * (mid - o.lo_hu), hi_veto = mid + o.veto_widen * (o.hi_hu - mid);
+  std::vector<float> R(n);
+  for (std::size_t p = 0; p < n; ++p)
+    R[p] = float(std::clamp(std::min(sm[p] - lo_veto, hi_veto - sm[p]) / std::max(o.ramp_hu, 1e-6), -1.0, 1.0));
+
+  // Edge stop of the outward push: g = 1 / (1 + (|∇I_σ| / k)²) on the HU smoothed like the edge
+  // map, k in HU/mm (a wall's step of ~50–100 HU over its blur of a few mm is 15–30 HU/mm: g ≈
+  // 0.1–0.3 at k = 10; noise left after smoothing is a few HU/mm: g ≈ 1 inside the organ).
+  if (o.edge_stop_hu_per_mm > 0) {
+    std::vector<float> es = hu;
+    gaussian(es, b, o.edge_sigma_mm);
+    for (int z = 0; z < b.nz; ++z)
+      for (int y = 0; y < b.ny; ++y)
+        for (int x = 0; x < b.nx; ++x) {
+          const Grad gr = central(es, b, x, y, z);
+          const double q = (gr.x * gr.x + gr.y * gr.y) / (o.edge_stop_hu_per_mm * o.edge_stop_hu_per_mm);
+          float& r = R[b.at(x, y, z)];
+          if (r > 0) r = float(r / (1 + q));
+        }
+  }
+
+  // Edge map and its GVF, in mm.
+  GvfField field = gvf_field(hu, b, o);
+  const std::vector<float>& u = field.u;
+  const std::vector<float>& v = field.v;
+  const std::vector<float>& w = field.w;
 
   // Level set: signed distance to the start's boundary, and the distance to the start itself.
   std::vector<std::uint8_t> outside0(n);
@@ -414,36 +266,95 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
   const double speed = std::max(o.region_weight + o.gvf_weight, 1e-6);
   const double dt = 0.9 * std::min(0.5 * hmin / speed, o.curvature_mm > 0 ? 1 / (2 * o.curvature_mm * inv2) : 1e9);
 
-  // Reinitialisation towards a signed distance (Sussman, Smereka & Osher 1994; Godunov upwind),
-  // keeping the zero level where it is.
-  std::vector<float> tmp(n);
-  auto reinit = [&](int iters, double within) {
-    const std::vector<float> phi0 = phi;
-    const double dtr = 0.5 * hmin;
-    for (int it = 0; it < iters; ++it) {
-      for_slices(b, o.parallel, [&](int z) {
-        for (int y = 0; y < b.ny; ++y)
-          for (int x = 0; x < b.nx; ++x) {
-            const std::size_t p = b.at(x, y, z);
-            if (std::abs(phi0[p]) > within) {
-              tmp[p] = phi[p];
-              continue;
-            }
-            const double S = phi0[p] / std::sqrt(double(phi0[p]) * phi0[p] + hmin * hmin);
-            double g2 = 0;
-            auto axis = [&](double c, double m, double pl, double hh) {
-              const double a = (c - m) / hh, bq = (pl - c) / hh;
-              if (S > 0) g2 += std::max(std::pow(std::max(a, 0.0), 2), std::pow(std::min(bq, 0.0), 2));
-              else g2 += std::max(std::pow(std::min(a, 0.0), 2), std::pow(std::max(bq, 0.0), 2));
-            };
-            const double c = phi[p];
-            axis(c, x > 0 ? phi[b.at(x - 1, y, z)] : c, x < b.nx - 1 ? phi[b.at(x + 1, y, z)] : c, b.hx);
-            axis(c, y > 0 ? phi[b.at(x, y - 1, z)] : c, y < b.ny - 1 ? phi[b.at(x, y + 1, z)] : c, b.hy);
-            if (b.nz > 1) axis(c, z > 0 ? phi[b.at(x, y, z - 1)] : c, z < b.nz - 1 ? phi[b.at(x, y, z + 1)] : c, b.hz);
-            tmp[p] = float(c - dtr * S * (std::sqrt(g2) - 1));
-          }
+  // The points a pass visits: the whole box, or a list of those near the surface (the narrow
+  // band; points outside it keep their value through the pass, so visiting only the list gives
+  // the same result as visiting the box and skipping them).
+  struct Pt {
+    std::size_t p;
+    int x, y, z;
+  };
+  auto collect = [&](const std::vector<float>& a, double within, std::vector<Pt>& list) {
+    list.clear();
+    for (int z = 0; z < b.nz; ++z)
+      for (int y = 0; y < b.ny; ++y)
+        for (int x = 0; x < b.nx; ++x) {
+          const std::size_t p = b.at(x, y, z);
+          if (std::abs(a[p]) <= within) list.push_back({p, x, y, z});
+        }
+  };
+  auto over = [&](const std::vector<Pt>& list, auto&& f) {
+    if (o.parallel)
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, list.size(), 2048), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) f(list[i]);
       });
-      phi.swap(tmp);
+    else
+      for (const Pt& q : list) f(q);
+  };
+
+
+  // Reinitialisation towards a signed distance (Sussman, Smereka & Osher 1994; Godunov upwind),
+  // keeping the zero level where it is; over the box, or where |φ| ≤ `within` at the start.
+  std::vector<float> tmp(n), phi0;
+  std::vector<Pt> near;
+  std::vector<double> S;  // the sign of φ at the start of a reinitialisation, smoothed
+  auto reinit = [&](int iters, double within) {
+    phi0 = phi;
+    S.resize(n);
+    const double dtr = 0.5 * hmin;
+    // Godunov's upwind |∇φ|² along one axis (c the point, m and pl its neighbours; one-sided at
+    // the box's faces, where the neighbour is the point itself).
+    auto axis = [](double s, double c, double m, double pl, double hh) __attribute__((always_inline)) {
+      const double a = (c - m) / hh, bq = (pl - c) / hh;
+      const double ap = std::max(a, 0.0), am = std::min(a, 0.0), bp = std::max(bq, 0.0), bm = std::min(bq, 0.0);
+      const double pos = std::max(ap * ap, bm * bm), neg = std::max(am * am, bp * bp);  // (both: no branch)
+      return s > 0 ? pos : neg;
+    };
+    auto update = [&](std::size_t p, double c, double xm, double xp, double ym, double yp, double zm, double zp)
+                      __attribute__((always_inline)) {
+      double g2 = 0;
+      g2 += axis(S[p], c, xm, xp, b.hx);
+      g2 += axis(S[p], c, ym, yp, b.hy);
+      g2 += axis(S[p], c, zm, zp, b.hz);  // (0 on a single slice: both neighbours are the point)
+      tmp[p] = float(c - dtr * S[p] * (std::sqrt(g2) - 1));
+    };
+    auto point = [&](const Pt& q) {
+      const std::size_t p = q.p;
+      const int x = q.x, y = q.y, z = q.z;
+      const double c = phi[p];
+      update(p, c, x > 0 ? phi[p - 1] : c, x < b.nx - 1 ? phi[p + 1] : c, y > 0 ? phi[b.at(x, y - 1, z)] : c,
+             y < b.ny - 1 ? phi[b.at(x, y + 1, z)] : c, z > 0 ? phi[b.at(x, y, z - 1)] : c,
+             z < b.nz - 1 ? phi[b.at(x, y, z + 1)] : c);
+    };
+    auto sign = [&](std::size_t p) { S[p] = phi0[p] / std::sqrt(double(phi0[p]) * phi0[p] + hmin * hmin); };
+    const bool all = !std::isfinite(within);
+    if (all) {
+      for (std::size_t p = 0; p < n; ++p) sign(p);
+    } else {
+      collect(phi0, within, near);
+      for (const Pt& q : near) sign(q.p);
+    }
+    for (int it = 0; it < iters; ++it) {
+      if (all) {
+        // Row by row; a neighbour row past the box's face is the row itself (one-sided there).
+        for_slices(b, o.parallel, [&](int z) {
+          for (int y = 0; y < b.ny; ++y) {
+            const std::size_t r = b.at(0, y, z);
+            const float* P = phi.data() + r;
+            const float* Pym = phi.data() + b.at(0, std::max(y - 1, 0), z);
+            const float* Pyp = phi.data() + b.at(0, std::min(y + 1, b.ny - 1), z);
+            const float* Pzm = phi.data() + b.at(0, y, std::max(z - 1, 0));
+            const float* Pzp = phi.data() + b.at(0, y, std::min(z + 1, b.nz - 1));
+            const int last = b.nx - 1;
+            update(r, P[0], P[0], P[std::min(1, last)], Pym[0], Pyp[0], Pzm[0], Pzp[0]);
+            for (int x = 1; x < last; ++x) update(r + x, P[x], P[x - 1], P[x + 1], Pym[x], Pyp[x], Pzm[x], Pzp[x]);
+            if (last > 0) update(r + last, P[last], P[last - 1], P[last], Pym[last], Pyp[last], Pzm[last], Pzp[last]);
+          }
+        });
+        phi.swap(tmp);
+      } else {
+        over(near, point);
+        over(near, [&](const Pt& q) { phi[q.p] = tmp[q.p]; });
+      }
     }
   };
   reinit(int(std::ceil(o.max_grow_mm / (0.5 * hmin))) + 4, std::numeric_limits<double>::infinity());
@@ -457,22 +368,26 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
   std::vector<float> Wc(n, 1.f);  // curvature weight: 1 where no wall is seen, less where one is
   const int rx = std::max(1, int(std::lround(o.local_radius_mm / b.hx))), ry = std::max(1, int(std::lround(o.local_radius_mm / b.hy))),
             rz = b.nz > 1 ? std::max(o.local_min_slices, int(std::lround(o.local_radius_mm / b.hz))) : 0;
+  // Window sums: A and A·I over the inside, B·I over the outside; the outside's count is the
+  // window's count Nw less A (sums of ones and zeros are exact in float).
+  std::vector<float> A, AI, BI, Nw, scratch;
+  if (o.local_radius_mm > 0) Nw.assign(n, 1.f), scratch.resize(n), box_sum(Nw, scratch, b, rx, ry, rz);
   auto local_region = [&] {
     if (o.local_radius_mm <= 0) return;
-    std::vector<float> hi_(n), hI(n), ho(n), oI(n);
+    A.resize(n), AI.resize(n), BI.resize(n);
     for (std::size_t p = 0; p < n; ++p) {
       const bool in = phi[p] < 0;
-      hi_[p] = in, hI[p] = in ? sm[p] : 0.f, ho[p] = !in, oI[p] = in ? 0.f : sm[p];
+      A[p] = in, AI[p] = in ? sm[p] : 0.f, BI[p] = in ? 0.f : sm[p];
     }
-    const auto A = box_sum(hi_, b, rx, ry, rz), AI = box_sum(hI, b, rx, ry, rz);
-    const auto B = box_sum(ho, b, rx, ry, rz), BI = box_sum(oI, b, rx, ry, rz);
+    box_sum(A, scratch, b, rx, ry, rz), box_sum(AI, scratch, b, rx, ry, rz), box_sum(BI, scratch, b, rx, ry, rz);
     const double c2 = o.min_contrast_hu * o.min_contrast_hu;
     for (std::size_t p = 0; p < n; ++p) {
-      if (A[p] < 0.5f || B[p] < 0.5f) {
+      const float B = Nw[p] - A[p];
+      if (A[p] < 0.5f || B < 0.5f) {
         Freg[p] = R[p];
         continue;
       }
-      const double mi = AI[p] / A[p], mo = BI[p] / B[p], d = mo - mi;
+      const double mi = AI[p] / A[p], mo = BI[p] / B, d = mo - mi;
       const double F = std::clamp((mo + mi - 2 * sm[p]) * d / std::max(d * d, c2), -1.0, 1.0);
       Freg[p] = float(F > 0 ? std::min(F, double(R[p])) : F);  // the window only vetoes growth
       if (o.contrast_curvature_hu > 0) Wc[p] = float(1 / (1 + d * d / (o.contrast_curvature_hu * o.contrast_curvature_hu)));
@@ -491,67 +406,115 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
   const int check_every = std::max(10, int(std::ceil(std::min(b.hx, b.hy) / dt)));
   const double band_mm = 3 * std::max({b.hx, b.hy, b.nz > 1 ? b.hz : b.hx});
   std::int64_t last = count_inside(), stable_since = 0;
-  int step = 0;
-  for (; step < o.max_steps; ++step) {
-    for_slices(b, o.parallel, [&](int z) {
-      for (int y = 0; y < b.ny; ++y)
-        for (int x = 0; x < b.nx; ++x) {
-          const std::size_t p = b.at(x, y, z);
-          const double c = phi[p];
-          // Narrow band: far from the surface φ only carries the distance (kept up by the
-          // reinitialisation over the whole box), and the zero level moves far less than the
-          // band between two reinitialisations.
-          if (std::abs(c) > band_mm) {
-            tmp[p] = float(c);
+  // The narrow band as runs of a row (points outside it only carry the distance, kept up by the
+  // reinitialisation over the whole box, and the zero level moves far less than the band between
+  // two reinitialisations): rebuilt after each reinitialisation, the only points a step moves.
+  struct Run {
+    int y, z, x0, x1;  // x0 ≤ x < x1
+  };
+  std::vector<Run> band;
+  auto collect_band = [&] {
+    band.clear();
+    for (int z = 0; z < b.nz; ++z)
+      for (int y = 0; y < b.ny; ++y) {
+        const float* P = phi.data() + b.at(0, y, z);
+        for (int x = 0; x < b.nx;) {
+          if (std::abs(P[x]) > band_mm) {
+            ++x;
             continue;
           }
-          const double xm = x > 0 ? phi[b.at(x - 1, y, z)] : c, xp = x < b.nx - 1 ? phi[b.at(x + 1, y, z)] : c;
-          const double ym = y > 0 ? phi[b.at(x, y - 1, z)] : c, yp = y < b.ny - 1 ? phi[b.at(x, y + 1, z)] : c;
-          const double zm = z > 0 ? phi[b.at(x, y, z - 1)] : c, zp = z < b.nz - 1 ? phi[b.at(x, y, z + 1)] : c;
-          const double dxm = (c - xm) / b.hx, dxp = (xp - c) / b.hx;
-          const double dym = (c - ym) / b.hy, dyp = (yp - c) / b.hy;
-          const double dzm = (c - zm) / b.hz, dzp = (zp - c) / b.hz;
-          // Region: −F |∇φ| upwind (Osher & Sethian).
-          const double F = o.region_weight * Freg[p];
-          double g2;
-          if (F > 0)
-            g2 = std::pow(std::max(dxm, 0.0), 2) + std::pow(std::min(dxp, 0.0), 2) + std::pow(std::max(dym, 0.0), 2) +
-                 std::pow(std::min(dyp, 0.0), 2) + std::pow(std::max(dzm, 0.0), 2) + std::pow(std::min(dzp, 0.0), 2);
-          else
-            g2 = std::pow(std::min(dxm, 0.0), 2) + std::pow(std::max(dxp, 0.0), 2) + std::pow(std::min(dym, 0.0), 2) +
-                 std::pow(std::max(dyp, 0.0), 2) + std::pow(std::min(dzm, 0.0), 2) + std::pow(std::max(dzp, 0.0), 2);
-          double rate = -F * std::sqrt(g2);
-          // GVF advection: −v·∇φ upwind.
-          const double vx = o.gvf_weight * u[p], vy = o.gvf_weight * v[p], vz = o.gvf_weight * w[p];
-          rate -= vx * (vx > 0 ? dxm : dxp) + vy * (vy > 0 ? dym : dyp) + vz * (vz > 0 ? dzm : dzp);
-          // Curvature: ε κ |∇φ| by central differences.
-          if (o.curvature_mm > 0) {
-            const double px = (xp - xm) / (2 * b.hx), py = (yp - ym) / (2 * b.hy), pz = (zp - zm) / (2 * hzc);
-            const double pxx = (xp - 2 * c + xm) / (b.hx * b.hx), pyy = (yp - 2 * c + ym) / (b.hy * b.hy),
-                         pzz = (zp - 2 * c + zm) / (hzc * hzc);
-            auto P = [&](int X, int Y, int Z) {
-              return double(phi[b.at(std::clamp(X, 0, b.nx - 1), std::clamp(Y, 0, b.ny - 1), std::clamp(Z, 0, b.nz - 1))]);
-            };
-            const double pxy = (P(x + 1, y + 1, z) - P(x + 1, y - 1, z) - P(x - 1, y + 1, z) + P(x - 1, y - 1, z)) / (4 * b.hx * b.hy);
-            const double pxz = (P(x + 1, y, z + 1) - P(x + 1, y, z - 1) - P(x - 1, y, z + 1) + P(x - 1, y, z - 1)) / (4 * b.hx * hzc);
-            const double pyz = (P(x, y + 1, z + 1) - P(x, y + 1, z - 1) - P(x, y - 1, z + 1) + P(x, y - 1, z - 1)) / (4 * b.hy * hzc);
-            const double gg = px * px + py * py + pz * pz;
-            if (gg > 1e-12)
-              rate += o.curvature_mm * Wc[p] *
-                      (pxx * (py * py + pz * pz) + pyy * (px * px + pz * pz) + pzz * (px * px + py * py) -
-                       2 * (px * py * pxy + px * pz * pxz + py * pz * pyz)) / gg;
-          }
-          double nv = c + dt * rate;
-          nv = std::max(nv, double(limit[p]));
-          if (core[p]) nv = std::min(nv, -0.5 * hmin);  // the start's core stays inside
-          tmp[p] = float(nv);
+          const int x0 = x;
+          while (x < b.nx && std::abs(P[x]) <= band_mm) ++x;
+          band.push_back({y, z, x0, x});
         }
+      }
+  };
+  auto over_band = [&](auto&& f) {
+    if (o.parallel)
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, band.size(), 64), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) f(band[i]);
+      });
+    else
+      for (const Run& q : band) f(q);
+  };
+  const bool curve = o.curvature_mm > 0;
+  std::vector<float> core_f(core.begin(), core.end());  // (as float: one element width with φ in the loop)
+  // One step along a run. Rows past the box's faces are the row itself and x-neighbours past them
+  // the point itself (one-sided differences there); branches are selects, so that the interior
+  // loop vectorises.
+  auto step_run = [&](const Run& q) {
+    const int y = q.y, z = q.z;
+    const int ym = std::max(y - 1, 0), yp = std::min(y + 1, b.ny - 1), zm = std::max(z - 1, 0), zp = std::min(z + 1, b.nz - 1);
+    const float* F0 = phi.data();
+    const std::size_t r = b.at(0, y, z);
+    const float *P = F0 + r, *Pym = F0 + b.at(0, ym, z), *Pyp = F0 + b.at(0, yp, z), *Pzm = F0 + b.at(0, y, zm),
+                *Pzp = F0 + b.at(0, y, zp), *Pypzp = F0 + b.at(0, yp, zp), *Pypzm = F0 + b.at(0, yp, zm),
+                *Pymzp = F0 + b.at(0, ym, zp), *Pymzm = F0 + b.at(0, ym, zm);
+    const float *Fr = Freg.data() + r, *Ur = u.data() + r, *Vr = v.data() + r, *Wr = w.data() + r,
+                *Wcr = Wc.data() + r, *Lr = limit.data() + r;
+    const float* Cr = core_f.data() + r;
+    float* out = tmp.data() + r;
+    auto sq = [](double t) __attribute__((always_inline)) { return t * t; };
+    auto cell = [&](auto with_curvature, int x, int xm_i, int xp_i) __attribute__((always_inline)) {
+      const double c = P[x];
+      const double xm = P[xm_i], xp = P[xp_i], ym = Pym[x], yp = Pyp[x], zm = Pzm[x], zp = Pzp[x];
+      const double dxm = (c - xm) / b.hx, dxp = (xp - c) / b.hx;
+      const double dym = (c - ym) / b.hy, dyp = (yp - c) / b.hy;
+      const double dzm = (c - zm) / b.hz, dzp = (zp - c) / b.hz;
+      // Region: −F |∇φ| upwind (Osher & Sethian).
+      const double F = o.region_weight * Fr[x];
+      const double g2p = sq(std::max(dxm, 0.0)) + sq(std::min(dxp, 0.0)) + sq(std::max(dym, 0.0)) +
+                         sq(std::min(dyp, 0.0)) + sq(std::max(dzm, 0.0)) + sq(std::min(dzp, 0.0));
+      const double g2n = sq(std::min(dxm, 0.0)) + sq(std::max(dxp, 0.0)) + sq(std::min(dym, 0.0)) +
+                         sq(std::max(dyp, 0.0)) + sq(std::min(dzm, 0.0)) + sq(std::max(dzp, 0.0));
+      double rate = -F * std::sqrt(F > 0 ? g2p : g2n);
+      // GVF advection: −v·∇φ upwind.
+      const double vx = o.gvf_weight * Ur[x], vy = o.gvf_weight * Vr[x], vz = o.gvf_weight * Wr[x];
+      rate -= vx * (vx > 0 ? dxm : dxp) + vy * (vy > 0 ? dym : dyp) + vz * (vz > 0 ? dzm : dzp);
+      // Curvature: ε κ |∇φ| by central differences.
+      if constexpr (decltype(with_curvature)::value) {
+        const double px = (xp - xm) / (2 * b.hx), py = (yp - ym) / (2 * b.hy), pz = (zp - zm) / (2 * hzc);
+        const double pxx = (xp - 2 * c + xm) / (b.hx * b.hx), pyy = (yp - 2 * c + ym) / (b.hy * b.hy),
+                     pzz = (zp - 2 * c + zm) / (hzc * hzc);
+        const double pxy = (double(Pyp[xp_i]) - Pym[xp_i] - Pyp[xm_i] + Pym[xm_i]) / (4 * b.hx * b.hy);
+        const double pxz = (double(Pzp[xp_i]) - Pzm[xp_i] - Pzp[xm_i] + Pzm[xm_i]) / (4 * b.hx * hzc);
+        const double pyz = (double(Pypzp[x]) - Pypzm[x] - Pymzp[x] + Pymzm[x]) / (4 * b.hy * hzc);
+        const double gg = px * px + py * py + pz * pz;
+        const double k = o.curvature_mm * Wcr[x] *
+                         (pxx * (py * py + pz * pz) + pyy * (px * px + pz * pz) + pzz * (px * px + py * py) -
+                          2 * (px * py * pxy + px * pz * pxz + py * pz * pyz)) / gg;
+        const double with_k = rate + k;  // (computed either way: a select, no branch)
+        rate = gg > 1e-12 ? with_k : rate;
+      }
+      double nv = c + dt * rate;
+      nv = std::max(nv, double(Lr[x]));
+      const double held = std::min(nv, -0.5 * hmin);
+      nv = Cr[x] > 0 ? held : nv;  // the start's core stays inside
+      out[x] = float(std::abs(c) > band_mm ? c : nv);  // a point that left the band stays
+    };
+    auto cells = [&](auto with_curvature) {
+      int x = q.x0;
+      if (x == 0) cell(with_curvature, 0, 0, std::min(1, b.nx - 1)), ++x;
+      const int end = std::min(q.x1, b.nx - 1);
+      for (; x < end; ++x) cell(with_curvature, x, x - 1, x + 1);
+      if (x < q.x1) cell(with_curvature, x, x - 1, x);  // x = nx − 1 (nx ≥ 2 here)
+    };
+    if (curve) cells(std::true_type{});
+    else cells(std::false_type{});
+  };
+  collect_band();
+  int step = 0;
+  for (; step < o.max_steps; ++step) {
+    over_band(step_run);
+    over_band([&](const Run& q) {
+      const std::size_t r = b.at(q.x0, q.y, q.z);
+      std::copy(tmp.begin() + std::ptrdiff_t(r), tmp.begin() + std::ptrdiff_t(r + std::size_t(q.x1 - q.x0)), phi.begin() + std::ptrdiff_t(r));
     });
-    phi.swap(tmp);
     // Every 5 steps the distance is restored near the surface, every 20 over the whole box (the
     // zero level moves under a pixel in between); the local means change slowly with the surface.
-    if ((step + 1) % 20 == 0) reinit(2, std::numeric_limits<double>::infinity()), local_region();
-    else if ((step + 1) % 5 == 0) reinit(2, 2 * band_mm);
+    // Between two reinitialisations only the band's points move.
+    if ((step + 1) % 20 == 0) reinit(2, std::numeric_limits<double>::infinity()), local_region(), collect_band();
+    else if ((step + 1) % 5 == 0) reinit(2, 2 * band_mm), collect_band();
     if ((step + 1) % check_every == 0) {
       const std::int64_t now = count_inside();
       if (std::llabs(now - last) <= std::max<std::int64_t>(1, last / 2000)) {
@@ -571,11 +534,14 @@ Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8
   for (std::size_t p = 0; p < n; ++p) in[p] = phi[p] < 0 || core[p];
   const std::vector<std::uint8_t> out = simple_topology(in, core, b);
   res.first_k = NZ, res.last_k = -1;
+  res.mask.origin_vox = {b.i0, b.j0, b.k0};
+  res.mask.size_vox = {b.nx, b.ny, b.nz};
+  res.mask.inside.assign(n, 0);
   for (int z = 0; z < b.nz; ++z)
     for (int y = 0; y < b.ny; ++y)
       for (int x = 0; x < b.nx; ++x)
         if (out[b.at(x, y, z)]) {
-          res.mask[std::size_t(g.offset(b.i0 + x, b.j0 + y, b.k0 + z))] = 1;
+          res.mask.inside[b.at(x, y, z)] = 1;
           ++res.voxels;
           res.first_k = std::min<std::int64_t>(res.first_k, b.k0 + z);
           res.last_k = std::max<std::int64_t>(res.last_k, b.k0 + z);

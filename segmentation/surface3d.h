@@ -24,6 +24,7 @@
 
 #include "core/volume.h"
 
+#include <array>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -60,8 +61,24 @@ struct Surface3dOptions {
   bool parallel = true;            ///< slices of the box on TBB workers
 };
 
+/// A mask over a box of a grid (x fastest): what a surface needs of a 512² × 300 grid is the box
+/// of a few dozen slices around the organ, not the whole grid's bytes.
+struct BoxMask {
+  std::array<std::int64_t, 3> origin_vox{};  ///< grid index of the box's first voxel
+  std::array<std::int64_t, 3> size_vox{};    ///< voxels along x, y, z (all 0: empty)
+  std::vector<std::uint8_t> inside;          ///< 1 = inside, over the box
+  /// Inside at grid index (i, j, k); false outside the box.
+  bool at(std::int64_t i, std::int64_t j, std::int64_t k) const;
+  /// The mask over the whole grid `g` (the box must lie in it).
+  std::vector<std::uint8_t> on_grid(const ImageGrid& g) const;
+};
+
+/// The voxels of `values` (g.voxel_count() of them, over the grid `g`) equal to `value`, in their
+/// bounding box.
+BoxMask box_mask_of(const std::uint8_t* values, const ImageGrid& g, std::uint8_t value);
+
 struct Surface3dResult {
-  std::vector<std::uint8_t> mask;  ///< over the whole grid, 1 = inside the surface
+  BoxMask mask;                    ///< over the working box, 1 = inside the surface
   int steps = 0;                   ///< evolution steps taken
   bool converged = false;          ///< the inside stopped changing before max_steps
   std::int64_t start_voxels = 0, voxels = 0;
@@ -72,15 +89,9 @@ struct Surface3dResult {
   std::string note;                ///< one line for segmentation.json
 };
 
-/// Evolves the surface from `start` (over the whole grid of `vol`, non-zero = inside). An empty
+/// Evolves the surface from `start` (a box of the grid of `vol`, non-zero = inside). An empty
 /// start gives an empty result. Deterministic for any thread count.
-Surface3dResult evolve_surface3d(const Volume& vol, const std::vector<std::uint8_t>& start,
+Surface3dResult evolve_surface3d(const Volume& vol, const BoxMask& start,
                                  const Surface3dOptions& options);
-
-/// Squared Euclidean distance, mm², from every voxel of an nx × ny × nz grid (x fastest, spacing
-/// hx, hy, hz) to the nearest voxel with `feature` non-zero (exact, separable; Felzenszwalb &
-/// Huttenlocher's lower envelope). Infinity everywhere when there is no feature voxel.
-std::vector<float> distance_sq_mm2(const std::vector<std::uint8_t>& feature, int nx, int ny, int nz, double hx,
-                                   double hy, double hz);
 
 }  // namespace organsmith::seg

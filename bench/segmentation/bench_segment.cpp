@@ -7,6 +7,7 @@
 
 #include <chrono>
 #include <cstdio>
+#include <string>
 
 using namespace organsmith;
 using Clock = std::chrono::steady_clock;
@@ -36,11 +37,18 @@ int main(int argc, char** argv) {
     PhantomOptions p2 = po;
     p2.slice_mm = slice;
     const Phantom ph2 = synthesize_phantom(p2, np);
-    const auto t0 = Clock::now();
-    const SegmentationResult r2 = segment_organs(ph2.ct, {req[0]}, {}, np);
-    const double all = std::chrono::duration<double>(Clock::now() - t0).count();
-    for (const auto& n : r2.organs[0].notes)
-      if (n.rfind("3-D surface", 0) == 0) std::printf("  %.1f mm slices: gallbladder %.2f s in all; %s\n", slice, all, n.c_str());
+    double all = 1e300;
+    std::string best_note;  // the 3-D stage's note (its time, box and memory) of the fastest run
+    for (int rep = 0; rep < 3; ++rep) {
+      const auto t0 = Clock::now();
+      const SegmentationResult r2 = segment_organs(ph2.ct, {req[0]}, {}, np);
+      const double t = std::chrono::duration<double>(Clock::now() - t0).count();
+      if (t >= all) continue;
+      all = t;
+      for (const auto& n : r2.organs[0].notes)
+        if (n.rfind("3-D surface", 0) == 0) best_note = n;
+    }
+    std::printf("  %.1f mm slices: gallbladder %.2f s in all (best of 3); %s\n", slice, all, best_note.c_str());
   }
   return best <= 2.0 ? 0 : 1;
 }
