@@ -296,6 +296,7 @@ OrganRegistry parse_organ_registry(std::string_view text, const fs::path& origin
     const toml::table* t = node.as_table();
     if (!t) throw CaseFileError("organ registry: '" + name + "' must be a table" + line_of(node), origin,
                                 "write each organ as [" + name + "]");
+    if (name == kSegmentDefaultsTable) continue;  // not an organ: where the segment tables start (read below)
     OrganInfo* o = const_cast<OrganInfo*>(r.find(name));
     if (!o) o = &r.organs.emplace_back();
     parse_organ(name, *t, *o, origin);

@@ -4,6 +4,7 @@
 #include "core/errors.h"
 #include "pipeline/case/case_file.h"
 #include "pipeline/case/organ_registry.h"
+#include "segmentation/presets.h"
 #include "tests/support/test_support.h"
 #include "viewer/image.h"
 
@@ -179,4 +180,32 @@ TEST(OrganRegistry, ARegistryFileAddsAnOrganWithItsOwnLoadCaseBedAndPath) {
   EXPECT_EQ(path["properties"]["bed_from_liver_label"].get<double>(), 1.0);
   EXPECT_GT(path["point_count"].get<int>(), 20);
   EXPECT_FALSE(fs::exists(tmp / "out" / "paths" / "gallbladder_dissection.json"));
+}
+
+TEST(OrganRegistry, SegmentPresetsStartFromTheRegistrysDefaultsTable) {
+  // The presets hold no numbers of their own: an organ's preset is [segment_defaults] with its
+  // own segment table over it, in the embedded registry and in a case's registry file.
+  const OrganPreset d = segment_defaults();
+  const auto builtin = default_organ_presets();
+  EXPECT_FALSE(builtin.count(std::string(kSegmentDefaultsTable))) << "the defaults table is not an organ";
+  EXPECT_FALSE(builtin_organ_registry().find(std::string(kSegmentDefaultsTable)));
+  const std::string cyst =
+      "[cyst]\nlabel = 9\nmesh = \"none\"\nneeds_seed = true\n[cyst.segment]\nalpha = 0.9\nregion_above_hu = 12.0\n";
+  auto p = parse_organ_presets(cyst, builtin, PresetText::registry).at("cyst");
+  EXPECT_EQ(p.alpha, 0.9);
+  EXPECT_EQ(p.region_above_hu, 12.0);
+  EXPECT_EQ(p.kappa, d.kappa);  // not in its table: the defaults'
+  EXPECT_EQ(p.max_held_in_a_row, d.max_held_in_a_row);
+  EXPECT_EQ(p.point_spacing_mm, d.point_spacing_mm);
+  // A registry file's own defaults table applies to the organs it adds, not to the built-in ones.
+  const auto with_own = parse_organ_presets("[segment_defaults]\nkappa = 0.25\n" + cyst, builtin, PresetText::registry);
+  EXPECT_EQ(with_own.at("cyst").kappa, 0.25);
+  EXPECT_EQ(with_own.at("gallbladder").kappa, builtin.at("gallbladder").kappa);
+  // The built-in organs: a key their table leaves out is the defaults' value.
+  EXPECT_EQ(builtin.at("trachea").region_above_hu, d.region_above_hu);
+  // Mistakes in the defaults table are named like an organ's.
+  std::string e = registry_error("[segment_defaults]\nkapa = 0.2\n");
+  EXPECT_TRUE(has(e, "unknown organ preset key 'segment_defaults.kapa'")) << e;
+  e = registry_error("[segment_defaults]\ngvf_mu = -1.0\n");
+  EXPECT_TRUE(has(e, "must be positive")) << e;
 }

@@ -14,7 +14,7 @@ using namespace organsmith::seg;
 namespace {
 
 OrganPreset preset() {
-  OrganPreset p;
+  OrganPreset p = segment_defaults();
   p.min_area_mm2 = 15;
   p.max_area_mm2 = 2600;
   p.max_area_ratio = 1.8;
