@@ -94,6 +94,16 @@ std::vector<std::string> OrganRegistry::path_names() const {
   return n;
 }
 
+std::vector<std::string> OrganRegistry::preferred_path_names() const {
+  std::vector<std::string> n;
+  for (const char* kind : {"incision", "dissection", "centerline"})
+    for (const auto& o : organs)
+      if (std::find(o.paths.begin(), o.paths.end(), kind) != o.paths.end()) n.push_back(o.name + "_" + kind);
+  for (const auto& name : path_names())  // a kind not above, last
+    if (std::find(n.begin(), n.end(), name) == n.end()) n.push_back(name);
+  return n;
+}
+
 const OrganInfo& OrganRegistry::at(std::string_view name, const fs::path& origin) const {
   if (const OrganInfo* o = find(name)) return *o;
   std::string known;

@@ -71,6 +71,9 @@ struct OrganRegistry {
   std::vector<std::string> modelled() const;
   /// Every guidance path the registry's organs have (<organ>_<kind>), in registry order.
   std::vector<std::string> path_names() const;
+  /// The same in the order a tool follows one when none is named: incisions (a cut along the
+  /// organ), then dissections (the rim of a bed), then centrelines; registry order within a kind.
+  std::vector<std::string> preferred_path_names() const;
 };
 
 /// The embedded data/organs.toml.

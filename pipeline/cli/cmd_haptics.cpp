@@ -138,7 +138,7 @@ int run_guide(const GuideFlags& f) {
 // ---- haptics -------------------------------------------------------------------------------------
 
 struct HapticsFlags {
-  std::string out, trajectory, mode = "mixed", report, path = "trachea_incision";
+  std::string out, trajectory, mode = "mixed", report, path;  // path: "" = the run's preferred
   LoopOptions loop;
   ContactOptions contact;
   std::vector<double> xi, bands, probe_lps;
@@ -214,9 +214,16 @@ int run_haptics(HapticsFlags f) {
   ScriptedDevice device = ScriptedDevice::read_csv(f.trajectory);
   const LabelMap labels = run_labels(out);
 
-  // The path.
+  // The path: the one named, else the first of the registry's preferred the run made.
   Polyline path;
-  if (is_registry_path(out, f.path)) {
+  if (f.path.empty()) {
+    const OrganRegistry registry = registry_of_output(out);
+    for (const auto& name : registry.preferred_path_names())
+      if (const fs::path pf = OutputLayout{out}.path(name, "json"); path.points_lps_mm.empty() && fs::exists(pf)) path = read_path_file(pf);
+    if (path.points_lps_mm.empty())
+      throw InputError(ExitCode::input_not_found, "no guidance path in " + OutputLayout{out}.paths_dir().string(),
+                       OutputLayout{out}.paths_dir(), "run `organsmith guide " + out.string() + "` (or `organsmith run`) first");
+  } else if (is_registry_path(out, f.path)) {
     const fs::path pf = OutputLayout{out}.path(f.path, "json");
     if (!fs::exists(pf))
       throw InputError(ExitCode::input_not_found, "no guidance path " + f.path, pf,
@@ -349,8 +356,11 @@ std::vector<Command> haptics_commands(CLI::App& app) {
       "and the gallbladder dissection line where the wall meets the liver bed; or a recorded path\n"
       "(CSV x,y,z or JSON, LPS mm). Writes OUT_DIR/paths/<name>.json and .vtp.");
   guide->add_option("out_dir", g->out, "output directory of `organsmith run`")->required();
-  guide->add_option("--path", g->path,
-                    "one path: trachea_centerline, trachea_incision, gallbladder_dissection, or a CSV/JSON file");
+  guide->add_option("--path", g->path, "one path: <organ>_<kind> of the run's registry (built in: " + [] {
+                      std::string n;
+                      for (const auto& p : builtin_organ_registry().path_names()) n += (n.empty() ? "" : ", ") + p;
+                      return n;
+                    }() + "), or a CSV/JSON file");
   guide->add_flag("--force", g->force, "redo the stage even when it is unchanged since the last run");
   guide->add_option("--first-ring", g->options.incision.first_ring, "incision: first ring from the cranial end (default 3)")
       ->check(CLI::Range(1, 100));
@@ -386,7 +396,8 @@ std::vector<Command> haptics_commands(CLI::App& app) {
   haptics->add_option("--mode", h->mode, "guidance (w1=1), mixed (0.5/0.5, default) or reaction (w2=1)")
       ->check(CLI::IsMember({"guidance", "mixed", "reaction"}));
   haptics->add_option("--out", h->report, "report JSON")->required();
-  haptics->add_option("--path", h->path, "guidance path name in OUT_DIR/paths (default trachea_incision) or a CSV/JSON file");
+  haptics->add_option("--path", h->path, "guidance path name in OUT_DIR/paths or a CSV/JSON file (default: the first the run made of "
+                    "an incision, a dissection, a centreline)");
   haptics->add_option("--fe", h->fe,
                       "--trajectory: organ felt through its real-time finite-element model (meshes/<organ>/<organ>.inp); "
                       "none: every organ through its surface and law (default: the gallbladder where its solver file exists)");

@@ -156,7 +156,7 @@ int cmd_preview(const PreviewFlags& f) {
                        names.empty() ? "run `organsmith guide " + f.out + "` first" : "paths there: " + names);
     }
   } else {
-    for (const char* name : {"trachea_incision", "gallbladder_dissection", "trachea_centerline"})
+    for (const auto& name : registry_of_output(out).preferred_path_names())
       for (const auto& p : os.scene.paths)
         if (!chosen && p.line.name == name) chosen = &p;
     if (!chosen && !os.scene.paths.empty()) chosen = &os.scene.paths.front();
@@ -277,8 +277,8 @@ std::vector<Command> viewer_commands(CLI::App& app) {
   prev->add_option("OUT_DIR", pa->out, "output directory of `organsmith run`")->required();
   prev->add_option("--size", pa->size, "window size WIDTHxHEIGHT (default 1024x768)");
   prev->add_option("--path", pa->path,
-                   "guidance path in OUT_DIR/paths (default: trachea_incision, else gallbladder_dissection, else "
-                   "trachea_centerline)");
+                   "guidance path in OUT_DIR/paths (default: the first the run made of an incision, a "
+                   "dissection, a centreline, in the registry's organ order)");
   prev->add_option("--mode", pa->mode, "starting mode: guidance, mixed (default) or reaction")
       ->check(CLI::IsMember({"guidance", "mixed", "reaction"}));
   prev->add_option("--rate", pa->rate_Hz, "haptic loop rate in Hz (default 1000)")->check(CLI::Range(10.0, 10000.0));

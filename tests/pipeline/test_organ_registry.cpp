@@ -11,7 +11,9 @@
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
 #include <fstream>
+#include <set>
 
 using namespace organsmith;
 using organsmith::testing::run_cli;
@@ -208,4 +210,21 @@ TEST(OrganRegistry, SegmentPresetsStartFromTheRegistrysDefaultsTable) {
   EXPECT_TRUE(has(e, "unknown organ preset key 'segment_defaults.kapa'")) << e;
   e = registry_error("[segment_defaults]\ngvf_mu = -1.0\n");
   EXPECT_TRUE(has(e, "must be positive")) << e;
+}
+
+TEST(OrganRegistry, PreferredPathsAreIncisionsThenDissectionsThenCentrelinesOfEveryOrgan) {
+  // haptics and preview follow the first of these the run made when no path is named.
+  const std::string extra =
+      "[duct]\nlabel = 9\nmesh = \"tube\"\nwall_mm = 1.0\nmaterials = { duct_wall = \"fung-wall/table-5.1.1/mean\" }\n"
+      "paths = [\"centerline\", \"incision\"]\n";
+  const OrganRegistry r = parse_organ_registry(extra, "/cases/organs.toml", builtin_organ_registry());
+  const auto all = r.path_names(), preferred = r.preferred_path_names();
+  EXPECT_EQ(std::set<std::string>(all.begin(), all.end()), std::set<std::string>(preferred.begin(), preferred.end()));
+  EXPECT_EQ(all.size(), preferred.size());
+  auto rank = [](const std::string& n) {
+    return n.ends_with("_incision") ? 0 : n.ends_with("_dissection") ? 1 : n.ends_with("_centerline") ? 2 : 3;
+  };
+  for (std::size_t i = 1; i < preferred.size(); ++i) EXPECT_LE(rank(preferred[i - 1]), rank(preferred[i])) << preferred[i];
+  EXPECT_TRUE(std::find(preferred.begin(), preferred.end(), "duct_incision") <
+              std::find(preferred.begin(), preferred.end(), "duct_centerline"));
 }
