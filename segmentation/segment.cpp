@@ -444,6 +444,254 @@ double slice_noise_hu(const SliceCtx& c, std::int64_t k, Point2 centre, double h
   return 1.4826 * double(*mid) / std::sqrt(2.0);
 }
 
+/// One propagation attempt's outcome: every section found (the start's among them) in slice order.
+struct Attempt {
+  std::vector<SliceContour> all;
+  std::string note_up, note_down;
+  std::vector<std::int64_t> held;  // slices fitted again within the previous section's reach
+  double lo = 0, hi = 0, mu = 0;
+};
+
+/// Count and time of the attempts of one kind (at the seed, slid off its slice, for a longer organ,
+/// recentred windows): each re-runs the whole two-direction propagation, so their cost is reported.
+struct AttemptCost {
+  int count = 0;
+  double seconds = 0;
+};
+
+/// A seeded organ's fixed inputs (image, preset, seed) and its attempts: each attempt fits the
+/// start section on slice k0 with the window centred on mu, then propagates both ways; the retries
+/// in segment_seeded change k0 or mu and attempt again.
+struct SeededRun {
+  const Volume& vol;
+  const SliceCtx& c;
+  const OrganPreset& p;
+  Eigen::Vector3d ijk;        ///< the seed, index
+  Eigen::Vector3d seed_lps;   ///< the seed, LPS mm
+  Point2 s;                   ///< the seed on its slice, mm
+  double seed_margin = 0;     ///< working window of the start section, mm
+  bool parallel = true;
+  Progress& progress;
+  std::int64_t k0 = 0;        ///< the next attempt's start slice
+  std::string kind = "at the seed";  ///< the next attempt's kind (its cost's key)
+  std::map<std::string, AttemptCost> costs;
+  std::atomic<int> done{0};
+
+  /// The start of an attempt: its section, window and the organ's coarse 3-D region.
+  struct Start {
+    Fit f0;
+    double lo = 0, hi = 0, mu = 0;
+    std::int64_t k0 = 0;
+    seg::Region3d region;
+  };
+  /// One direction's sections, why it stopped, and the slices held within reach.
+  struct Direction {
+    std::vector<SliceContour> acc;
+    std::string note;
+    std::vector<std::int64_t> held;
+  };
+
+  /// One attempt, timed under `kind`.
+  Attempt attempt(double mu, bool refine_on_seed_slice) {
+    AttemptCost& cost = costs[kind];
+    ++cost.count;
+    struct Timer {
+      AttemptCost& cost;
+      std::chrono::steady_clock::time_point t0 = std::chrono::steady_clock::now();
+      ~Timer() { cost.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); }
+    } timer{cost};
+    return attempt_body(mu, refine_on_seed_slice);
+  }
+
+  /// The start section with the window centred on `mu` (refined on the start slice's own median
+  /// when `refine_on_seed_slice`), then propagation both ways from it.
+  Attempt attempt_body(double mu, bool refine_on_seed_slice) {
+    StartSection start = start_section(c, k0, s, p, mu, refine_on_seed_slice, seed_margin);
+    Start st{std::move(start.fit), start.lo, start.hi, start.mu, k0, {}};
+    const Fit& f0 = st.f0;
+    if (f0.area_mm2 < p.min_area_mm2 || f0.area_mm2 > p.max_area_mm2) {
+      char b[256];
+      std::snprintf(b, sizeof b, "%s not found at seed %s: the contour %s (%.0f mm², expected %.0f–%.0f mm²)",
+                    p.organ.c_str(), fmt_mm(seed_lps).c_str(), f0.area_mm2 < p.min_area_mm2 ? "collapsed" : "leaked",
+                    f0.area_mm2, p.min_area_mm2, p.max_area_mm2);
+      throw SegmentationError(ExitCode::organ_not_found, b, "check that the seed lies inside the " + p.organ);
+    }
+    // The organ's coarse 3-D region in the same window: where the organ continues on the next
+    // slice, and the start contour there.
+    seg::Region3dOptions ro;
+    ro.lo_hu = st.lo;
+    ro.hi_hu = st.hi;
+    ro.sigma_mm = region_sigma_mm(p, c);
+    ro.open_mm = std::max(p.region_open_mm, std::min(c.sx, c.sy));
+    ro.half_width_mm = std::sqrt(p.max_area_mm2 / M_PI) + 20.0;
+    ro.half_length_mm = p.max_length_mm;
+    st.region = seg::grow_region3d(vol, std::llround(ijk.x()), std::llround(ijk.y()), k0, ro);
+    Direction up, down;
+    if (parallel)
+      tbb::parallel_invoke([&] { up = propagate(st, +1, f0.pts); }, [&] { down = propagate(st, -1, f0.pts); });
+    else {
+      up = propagate(st, +1, f0.pts);
+      down = propagate(st, -1, f0.pts);
+    }
+    if (p.guide_core_fraction > 0) {
+      const std::vector<SliceContour> up0 = up.acc, down0 = down.acc;
+      redo_from_core(st, +1, up, down0);
+      redo_from_core(st, -1, down, up0);
+    }
+    Attempt at;
+    at.all.assign(down.acc.rbegin(), down.acc.rend());
+    at.all.push_back({k0, f0.pts});
+    at.all.insert(at.all.end(), up.acc.begin(), up.acc.end());
+    at.note_up = up.note;
+    at.note_down = down.note;
+    at.held.assign(down.held.rbegin(), down.held.rend());
+    at.held.insert(at.held.end(), up.held.begin(), up.held.end());
+    at.lo = st.lo;
+    at.hi = st.hi;
+    at.mu = st.mu;
+    return at;
+  }
+
+  /// Slice after slice from the start section in direction `dir` (+1 or −1), each slice started
+  /// from `seed_guide` or the section before, until a stop rule (detail/section_rules.h) fires.
+  Direction propagate(const Start& st, int dir, const std::vector<Point2>& seed_guide) {
+    const ImageGrid& g = vol.grid;
+    const std::int64_t K = g.size_vox[2];
+    Direction d;
+    std::vector<Point2> prev = st.f0.pts;
+    double prev_area = st.f0.area_mm2;
+    // Where the next slice starts from, and what its start decisions compare with: the previous
+    // section, less any part of it that lay off the section before (a lobe there is a neighbour
+    // joined in below the leak tests' limits more often than the organ).
+    std::vector<Point2> guide = seed_guide;
+    // The organ's drift between slices (centroid of the last section less the one before).
+    Point2 drift{0, 0};
+    int held_in_a_row = 0;
+    std::vector<Point2> anchor;  // the last section found unaided, while the slice before was held
+    double anchor_area = 0;
+    // Slices held within reach just before the stop stay: on thick noisy slices the held slice is
+    // most often the organ's last small section (the fundus against the liver), not a neighbour
+    // past its end; dropping them had cost up to 0.08 Dice on noisier such runs (segmentation
+    // README).
+    // Areas of the slices behind, for the leak test over at least area_ratio_span_mm (thin slices
+    // let a leak grow by a few per cent a slice, each step under the ratio).
+    std::vector<double> areas{st.f0.area_mm2};
+    const std::size_t span = std::size_t(std::max(1.0, std::floor(p.area_ratio_span_mm / g.spacing_mm.z() + 1e-9)));
+    for (std::int64_t k = st.k0 + dir; k >= 0 && k < K; k += dir) {
+      progress.check_cancelled();
+      progress.report(std::min(0.99, double(++done) / 40.0), "segmenting " + p.organ);
+      // Start inside the neighbour's contour, so the pressure grows it out to this slice's edge
+      // rather than having to pull a too-large start back.
+      std::vector<Point2> init = scaled(guide, 0.7);
+      // Where the 3-D region continues under the previous contour (a section that moved
+      // sideways, as a fundus does between thick slices), start from its shrunken outline.
+      const cv::Mat under = seg::region_under(st.region, k, guide, c.sx, c.sy, p.region_reach_mm);
+      double a_under = 0;
+      bool from_region = false;
+      if (!under.empty()) {
+        a_under = cv::countNonZero(under) * c.sx * c.sy;
+        const std::vector<Point2> outline = seg::mask_outline_mm(st.region, under, c.sx, c.sy);
+        if (a_under >= p.min_area_mm2 && a_under <= p.max_area_ratio * prev_area && outline.size() >= 4)
+          init = scaled(outline, 0.7), from_region = true;
+      }
+      const double m_init = median_inside(c, k, init);
+      if (!(m_init >= st.lo && m_init <= st.hi)) {
+        d.note = "stopped at slice " + std::to_string(k) + ": the region left the organ's HU window";
+        return d;
+      }
+      Fit f = fit_slice(c, k, init, p, st.lo, st.hi, p.roi_margin_mm, opening_for(p, prev_area));
+      if (from_region && p.continuity_margin_mm > 0) {
+        // The region may have joined a neighbour (duodenum through a wall that noise hides); a
+        // start inside the previous section is tried too, and the section that continues the
+        // previous one more is kept: its area within the shift tolerance of the previous
+        // section less its area beyond (a larger section is not better for lying off it).
+        Fit inside = fit_slice(c, k, scaled(guide, 0.7), p, st.lo, st.hi, p.roi_margin_mm, opening_for(p, prev_area));
+        auto on_prev = [&](const Fit& x) {
+          return x.area_mm2 * (1.0 - 2.0 * area_outside(x.pts, guide, p.shift_tolerance_mm, c.sx, c.sy));
+        };
+        if (inside.area_mm2 >= p.min_area_mm2 && on_prev(inside) > on_prev(f)) f = std::move(inside);
+      } else if (from_region &&
+          area_outside(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction) {
+        // Started from the region's outline the snake slid onto another structure: start again
+        // inside the previous section.
+        Fit again = fit_slice(c, k, scaled(guide, 0.7), p, st.lo, st.hi, p.roi_margin_mm, opening_for(p, prev_area));
+        if (again.area_mm2 >= p.min_area_mm2 &&
+            area_outside(again.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) <= p.max_shifted_fraction)
+          f = std::move(again);
+      }
+      // Whether this slice's section continues the organ (the stop rules: detail/section_rules.h).
+      std::vector<Point2> moved_prev;
+      for (const auto& q : prev) moved_prev.push_back({q.x + drift.x, q.y + drift.y});
+      seg::SectionHistory history;
+      history.previous = &prev;
+      history.previous_area_mm2 = prev_area;
+      history.earlier_area_mm2 = areas[areas.size() > span ? areas.size() - span : 0];
+      history.previous_moved = &moved_prev;
+      history.unaided = &anchor;
+      history.unaided_area_mm2 = anchor_area;
+      history.region_area_mm2 = a_under;
+      history.organ_mean_hu = st.mu;
+      history.sx = c.sx, history.sy = c.sy;
+      auto judge = [&](const Fit& x) {
+        return seg::judge_section({&x.pts, x.area_mm2, x.edge_support}, history, p,
+                                  [&] { return median_inside(c, k, x.pts); });
+      };
+      seg::SectionStop stop = judge(f);
+      if (seg::is_leak(stop) && p.continuity_margin_mm > 0 && held_in_a_row < p.max_held_in_a_row) {
+        // A leak need not end the organ: the continuity hold fits the slice again within reach
+        // of the previous section, and the organ goes on if that section passes every rule.
+        std::optional<Fit> held =
+            continuity_hold(c, k, moved_prev, p, st.lo, st.hi, opening_for(p, prev_area), g.spacing_mm.z());
+        if (held && judge(*held) == seg::SectionStop::none) {
+          if (held_in_a_row == 0) anchor = prev, anchor_area = prev_area;
+          f = std::move(*held);
+          stop = seg::SectionStop::none;
+          ++held_in_a_row;
+          d.held.push_back(k);
+        }
+      } else if (stop == seg::SectionStop::none) {
+        held_in_a_row = 0;
+        anchor.clear();
+      }
+      if (stop != seg::SectionStop::none) {
+        d.note = seg::stop_note(stop, k);
+        return d;
+      }
+      d.acc.push_back({k, f.pts});
+      const Point2 c_prev = centroid(prev), c_new = centroid(f.pts);
+      drift = {c_new.x - c_prev.x, c_new.y - c_prev.y};
+      guide = f.pts;
+      if (p.guide_core_fraction > 0) {
+        auto [core, core_area] = part_within(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy);
+        if (core.size() >= 8 && core_area >= p.min_area_mm2 && core_area >= p.guide_core_fraction * f.area_mm2)
+          guide = std::move(core);
+      }
+      prev = f.pts;
+      prev_area = f.area_mm2;
+      areas.push_back(f.area_mm2);
+    }
+    d.note = std::string("reached the ") + (dir > 0 ? "last" : "first") + " slice";
+    return d;
+  }
+
+  /// The start slice has no section before it: a lobe of a neighbour it took in can lead one
+  /// direction onto that neighbour. Where part of the start's section lies off the first section
+  /// found the other way (`other`), and the first section this way lies mostly on that part, this
+  /// way is run again from the part that continues the other way.
+  void redo_from_core(const Start& st, int dir, Direction& d, const std::vector<SliceContour>& other) {
+    const Fit& f0 = st.f0;
+    if (d.acc.empty() || other.empty()) return;
+    auto [core, core_area] = part_within(f0.pts, other.front().pts, p.shift_tolerance_mm, c.sx, c.sy);
+    if (core.size() < 8 || core_area < p.min_area_mm2 || core_area < p.guide_core_fraction * f0.area_mm2 ||
+        core_area > 0.9 * f0.area_mm2)
+      return;
+    if (area_outside(d.acc.front().pts, core, p.shift_tolerance_mm, c.sx, c.sy) <= p.max_shifted_fraction) return;
+    Direction again = propagate(st, dir, core);
+    d.acc = std::move(again.acc), d.held = std::move(again.held);
+    d.note = again.note + " (run again from the part of the seed's section that continues the other way)";
+  }
+};
+
 OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, const OrganPreset& preset, bool parallel,
                                  Progress& progress) {
   OrganPreset p = preset;  // region smoothing adapts to the image below
@@ -485,223 +733,10 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     throw SegmentationError(ExitCode::bad_seed, b,
                             "place the seed inside the " + p.organ + " (not in air, fat, bone or a neighbouring organ)");
   }
-  const double seed_margin = std::max(p.roi_margin_mm, std::sqrt(p.max_area_mm2 / M_PI) + 10.0);
-  auto open_for = [&](double area_mm2) { return opening_for(p, area_mm2); };
   const std::int64_t K = g.size_vox[2];
-  std::atomic<int> done{0};
-  struct Attempt {
-    std::vector<SliceContour> all;
-    std::string note_up, note_down;
-    std::vector<std::int64_t> held;  // slices fitted again within the previous section's reach
-    double lo = 0, hi = 0, mu = 0;
-  };
-  // One segmentation with the window centred on `mu` (refined on the seed slice when
-  // `refine_on_seed_slice`).
-  // Each attempt runs the whole two-direction propagation; their count and time by kind (the
-  // seed's slice, starts slid off it, starts for a longer organ, recentred windows) go into the
-  // organ's notes, so that the retries' cost is seen.
-  struct AttemptCost {
-    int count = 0;
-    double seconds = 0;
-  };
-  std::map<std::string, AttemptCost> costs;
-  std::string attempt_kind = "at the seed";
-  auto attempt_body = [&](double mu, bool refine_on_seed_slice) {
-    StartSection start = start_section(c, k0, s, p, mu, refine_on_seed_slice, seed_margin);
-    mu = start.mu;
-    const double lo = start.lo, hi = start.hi;
-    const Fit f0 = std::move(start.fit);
-    if (f0.area_mm2 < p.min_area_mm2 || f0.area_mm2 > p.max_area_mm2) {
-      char b[256];
-      std::snprintf(b, sizeof b, "%s not found at seed %s: the contour %s (%.0f mm², expected %.0f–%.0f mm²)",
-                    p.organ.c_str(), fmt_mm(seed_lps).c_str(), f0.area_mm2 < p.min_area_mm2 ? "collapsed" : "leaked",
-                    f0.area_mm2, p.min_area_mm2, p.max_area_mm2);
-      throw SegmentationError(ExitCode::organ_not_found, b, "check that the seed lies inside the " + p.organ);
-    }
-    // The organ's coarse 3-D region in the same window: where the organ continues on the next
-    // slice, and the start contour there.
-    seg::Region3dOptions ro;
-    ro.lo_hu = lo;
-    ro.hi_hu = hi;
-    ro.sigma_mm = region_sigma_mm(p, c);
-    ro.open_mm = std::max(p.region_open_mm, std::min(c.sx, c.sy));
-    ro.half_width_mm = std::sqrt(p.max_area_mm2 / M_PI) + 20.0;
-    ro.half_length_mm = p.max_length_mm;
-    const seg::Region3d region = seg::grow_region3d(vol, std::llround(ijk.x()), std::llround(ijk.y()), k0, ro);
-    std::vector<SliceContour> up, down;
-    std::string note_up, note_down;
-    std::vector<std::int64_t> held_up, held_down;
-    auto propagate = [&](int dir, std::vector<SliceContour>& acc, std::string& note, std::vector<std::int64_t>& held_k,
-                         const std::vector<Point2>& seed_guide) {
-      std::vector<Point2> prev = f0.pts;
-      double prev_area = f0.area_mm2;
-      // Where the next slice starts from, and what its start decisions compare with: the previous
-      // section, less any part of it that lay off the section before (a lobe there is a neighbour
-      // joined in below the leak tests' limits more often than the organ).
-      std::vector<Point2> guide = seed_guide;
-      // The organ's drift between slices (centroid of the last section less the one before).
-      Point2 drift{0, 0};
-      int held_in_a_row = 0;
-      std::vector<Point2> anchor;  // the last section found unaided, while the slice before was held
-      double anchor_area = 0;
-      // Slices held within reach just before the stop stay: on thick noisy slices the held slice is
-      // most often the organ's last small section (the fundus against the liver), not a neighbour
-      // past its end; dropping them had cost up to 0.08 Dice on noisier such runs (segmentation
-      // README).
-      // Areas of the slices behind, for the leak test over at least area_ratio_span_mm (thin slices
-      // let a leak grow by a few per cent a slice, each step under the ratio).
-      std::vector<double> areas{f0.area_mm2};
-      const std::size_t span = std::size_t(std::max(1.0, std::floor(p.area_ratio_span_mm / g.spacing_mm.z() + 1e-9)));
-      for (std::int64_t k = k0 + dir; k >= 0 && k < K; k += dir) {
-        progress.check_cancelled();
-        progress.report(std::min(0.99, double(++done) / 40.0), "segmenting " + p.organ);
-        // Start inside the neighbour's contour, so the pressure grows it out to this slice's edge
-        // rather than having to pull a too-large start back.
-        std::vector<Point2> init = scaled(guide, 0.7);
-        // Where the 3-D region continues under the previous contour (a section that moved
-        // sideways, as a fundus does between thick slices), start from its shrunken outline.
-        const cv::Mat under = seg::region_under(region, k, guide, c.sx, c.sy, p.region_reach_mm);
-        double a_under = 0;
-        bool from_region = false;
-        if (!under.empty()) {
-          a_under = cv::countNonZero(under) * c.sx * c.sy;
-          const std::vector<Point2> outline = seg::mask_outline_mm(region, under, c.sx, c.sy);
-          if (a_under >= p.min_area_mm2 && a_under <= p.max_area_ratio * prev_area && outline.size() >= 4)
-            init = scaled(outline, 0.7), from_region = true;
-        }
-        const double m_init = median_inside(c, k, init);
-        if (!(m_init >= lo && m_init <= hi)) {
-          note = "stopped at slice " + std::to_string(k) + ": the region left the organ's HU window";
-          return;
-        }
-        Fit f = fit_slice(c, k, init, p, lo, hi, p.roi_margin_mm, open_for(prev_area));
-        if (from_region && p.continuity_margin_mm > 0) {
-          // The region may have joined a neighbour (duodenum through a wall that noise hides); a
-          // start inside the previous section is tried too, and the section that continues the
-          // previous one more is kept: its area within the shift tolerance of the previous
-          // section less its area beyond (a larger section is not better for lying off it).
-          Fit inside = fit_slice(c, k, scaled(guide, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area));
-          auto on_prev = [&](const Fit& x) {
-            return x.area_mm2 * (1.0 - 2.0 * area_outside(x.pts, guide, p.shift_tolerance_mm, c.sx, c.sy));
-          };
-          if (inside.area_mm2 >= p.min_area_mm2 && on_prev(inside) > on_prev(f)) f = std::move(inside);
-        } else if (from_region &&
-            area_outside(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) > p.max_shifted_fraction) {
-          // Started from the region's outline the snake slid onto another structure: start again
-          // inside the previous section.
-          Fit again = fit_slice(c, k, scaled(guide, 0.7), p, lo, hi, p.roi_margin_mm, open_for(prev_area));
-          if (again.area_mm2 >= p.min_area_mm2 &&
-              area_outside(again.pts, prev, p.shift_tolerance_mm, c.sx, c.sy) <= p.max_shifted_fraction)
-            f = std::move(again);
-        }
-        // Whether this slice's section continues the organ (the stop rules: detail/section_rules.h).
-        std::vector<Point2> moved_prev;
-        for (const auto& q : prev) moved_prev.push_back({q.x + drift.x, q.y + drift.y});
-        seg::SectionHistory history;
-        history.previous = &prev;
-        history.previous_area_mm2 = prev_area;
-        history.earlier_area_mm2 = areas[areas.size() > span ? areas.size() - span : 0];
-        history.previous_moved = &moved_prev;
-        history.unaided = &anchor;
-        history.unaided_area_mm2 = anchor_area;
-        history.region_area_mm2 = a_under;
-        history.organ_mean_hu = mu;
-        history.sx = c.sx, history.sy = c.sy;
-        auto judge = [&](const Fit& x) {
-          return seg::judge_section({&x.pts, x.area_mm2, x.edge_support}, history, p,
-                                    [&] { return median_inside(c, k, x.pts); });
-        };
-        seg::SectionStop stop = judge(f);
-        if (seg::is_leak(stop) && p.continuity_margin_mm > 0 && held_in_a_row < p.max_held_in_a_row) {
-          // A leak need not end the organ: the continuity hold fits the slice again within reach
-          // of the previous section, and the organ goes on if that section passes every rule.
-          std::optional<Fit> held =
-              continuity_hold(c, k, moved_prev, p, lo, hi, open_for(prev_area), g.spacing_mm.z());
-          if (held && judge(*held) == seg::SectionStop::none) {
-            if (held_in_a_row == 0) anchor = prev, anchor_area = prev_area;
-            f = std::move(*held);
-            stop = seg::SectionStop::none;
-            ++held_in_a_row;
-            held_k.push_back(k);
-          }
-        } else if (stop == seg::SectionStop::none) {
-          held_in_a_row = 0;
-          anchor.clear();
-        }
-        if (stop != seg::SectionStop::none) {
-          note = seg::stop_note(stop, k);
-          return;
-        }
-        acc.push_back({k, f.pts});
-        const Point2 c_prev = centroid(prev), c_new = centroid(f.pts);
-        drift = {c_new.x - c_prev.x, c_new.y - c_prev.y};
-        guide = f.pts;
-        if (p.guide_core_fraction > 0) {
-          auto [core, core_area] = part_within(f.pts, prev, p.shift_tolerance_mm, c.sx, c.sy);
-          if (core.size() >= 8 && core_area >= p.min_area_mm2 && core_area >= p.guide_core_fraction * f.area_mm2)
-            guide = std::move(core);
-        }
-        prev = f.pts;
-        prev_area = f.area_mm2;
-        areas.push_back(f.area_mm2);
-      }
-      note = std::string("reached the ") + (dir > 0 ? "last" : "first") + " slice";
-    };
-    if (parallel)
-      tbb::parallel_invoke([&] { propagate(+1, up, note_up, held_up, f0.pts); },
-                           [&] { propagate(-1, down, note_down, held_down, f0.pts); });
-    else {
-      propagate(+1, up, note_up, held_up, f0.pts);
-      propagate(-1, down, note_down, held_down, f0.pts);
-    }
-    // The seed slice has no section before it: a lobe of a neighbour it took in can lead one
-    // direction onto that neighbour. Where part of the seed's section lies off the first section
-    // found the other way, and the first section this way lies mostly on that part, this way is
-    // run again from the part that continues the other way.
-    if (p.guide_core_fraction > 0) {
-      auto redo = [&](int dir, std::vector<SliceContour>& acc, std::string& note, std::vector<std::int64_t>& held_k,
-                      const std::vector<SliceContour>& other) {
-        if (acc.empty() || other.empty()) return;
-        auto [core, core_area] = part_within(f0.pts, other.front().pts, p.shift_tolerance_mm, c.sx, c.sy);
-        if (core.size() < 8 || core_area < p.min_area_mm2 || core_area < p.guide_core_fraction * f0.area_mm2 ||
-            core_area > 0.9 * f0.area_mm2)
-          return;
-        if (area_outside(acc.front().pts, core, p.shift_tolerance_mm, c.sx, c.sy) <= p.max_shifted_fraction) return;
-        std::vector<SliceContour> acc2;
-        std::string note2;
-        std::vector<std::int64_t> held2;
-        propagate(dir, acc2, note2, held2, core);
-        acc = std::move(acc2), held_k = std::move(held2);
-        note = note2 + " (run again from the part of the seed's section that continues the other way)";
-      };
-      const std::vector<SliceContour> up0 = up, down0 = down;
-      redo(+1, up, note_up, held_up, down0);
-      redo(-1, down, note_down, held_down, up0);
-    }
-    Attempt at;
-    at.all.assign(down.rbegin(), down.rend());
-    at.all.push_back({k0, f0.pts});
-    at.all.insert(at.all.end(), up.begin(), up.end());
-    at.note_up = note_up;
-    at.note_down = note_down;
-    at.held.assign(held_down.rbegin(), held_down.rend());
-    at.held.insert(at.held.end(), held_up.begin(), held_up.end());
-    at.lo = lo;
-    at.hi = hi;
-    at.mu = mu;
-    return at;
-  };
-  auto attempt = [&](double mu, bool refine_on_seed_slice) {
-    const auto t0 = std::chrono::steady_clock::now();
-    AttemptCost& cost = costs[attempt_kind];
-    ++cost.count;
-    struct Timer {
-      AttemptCost& cost;
-      std::chrono::steady_clock::time_point t0;
-      ~Timer() { cost.seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(); }
-    } timer{cost, t0};
-    return attempt_body(mu, refine_on_seed_slice);
-  };
+  SeededRun run{vol, c, p, ijk, seed_lps, s, std::max(p.roi_margin_mm, std::sqrt(p.max_area_mm2 / M_PI) + 10.0), parallel,
+                progress};
+  run.k0 = k0;
   // A seed in a section too small to fit (a neck or a fundus tip a few pixels across, blurred
   // with the liver around it) starts from the nearest slice within seed_slide_mm where the
   // section at the seed's position fits; propagation then comes back through the seed's slice.
@@ -712,13 +747,13 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     bool fitted = false;
     for (int sign : {-1, 1}) {
       if (d == 0 && sign > 0) continue;
-      k0 = k_seed + sign * d;
-      if (k0 < 0 || k0 >= K) continue;
-      const double m = d == 0 ? seed_med : hu_at_seed(k0);
+      run.k0 = k_seed + sign * d;
+      if (run.k0 < 0 || run.k0 >= K) continue;
+      const double m = d == 0 ? seed_med : hu_at_seed(run.k0);
       if (!seed_like(m)) continue;
-      attempt_kind = d == 0 ? "at the seed" : "slid off the seed's slice";
+      run.kind = d == 0 ? "at the seed" : "slid off the seed's slice";
       try {
-        at = attempt(m, true);
+        at = run.attempt(m, true);
         fitted = true;
         break;
       } catch (const SegmentationError& e) {
@@ -727,9 +762,9 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     }
     if (fitted) break;
     if (d >= slide) {
-      k0 = k_seed;
-      attempt_kind = "at the seed";
-      at = attempt(seed_med, true);  // reports why the seed's own slice fails
+      run.k0 = k_seed;
+      run.kind = "at the seed";
+      at = run.attempt(seed_med, true);  // reports why the seed's own slice fails
       break;
     }
   }
@@ -743,24 +778,24 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   auto extent_mm = [&](const Attempt& a) { return double(a.all.back().k - a.all.front().k + 1) * g.spacing_mm.z(); };
   if (extent_mm(at) < p.min_extent_mm) {
     const double first_mm = extent_mm(at);
-    const std::int64_t k_first = k0;
-    std::int64_t k_best = k0;
+    const std::int64_t k_first = run.k0;
+    std::int64_t k_best = run.k0;
     for (int d = 1; d <= std::max(1, slide); ++d)
       for (int sign : {-1, 1}) {
-        k0 = k_seed + sign * d;
-        if (k0 < 0 || k0 >= K) continue;
-        const double m = hu_at_seed(k0);
+        run.k0 = k_seed + sign * d;
+        if (run.k0 < 0 || run.k0 >= K) continue;
+        const double m = hu_at_seed(run.k0);
         if (!seed_like(m)) continue;
-        attempt_kind = "for a longer organ";
+        run.kind = "for a longer organ";
         try {
-          Attempt other = attempt(m, true);
-          if (extent_mm(other) > extent_mm(at)) at = std::move(other), k_best = k0;
+          Attempt other = run.attempt(m, true);
+          if (extent_mm(other) > extent_mm(at)) at = std::move(other), k_best = run.k0;
         } catch (const SegmentationError&) {
           // no organ from this start
         }
       }
-    k0 = k_best;
-    if (k0 != k_first) {
+    run.k0 = k_best;
+    if (run.k0 != k_first) {
       char b[160];
       std::snprintf(b, sizeof b, "the start at the seed gave an organ %.0f mm long across the slices (under %.0f mm)",
                     first_mm, p.min_extent_mm);
@@ -777,9 +812,9 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     if (const std::optional<double> median = sections_median_hu(vol, c, at.all)) {
       const double m3 = *median;
       if (seed_like(m3) && std::abs(m3 - at.mu) > 1.5) {
-        attempt_kind = "recentred window";
+        run.kind = "recentred window";
         try {
-          Attempt second = attempt(m3, false);
+          Attempt second = run.attempt(m3, false);
           // A window a few HU away changes the outline a little; a second pass that loses a fifth
           // of the organ or more (a section in the organ's middle fitted short on a noisy slice,
           // after which propagation ended at the jump back) is not the steadier one.
@@ -814,14 +849,14 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
     for (const auto k : at.held) ks += (ks.empty() ? "" : ", ") + std::to_string(k);
     out.notes.push_back("leaked on slice(s) " + ks + "; fitted again within the previous section's reach");
   }
-  if (k0 != k_seed)
-    out.notes.push_back("started at slice " + std::to_string(k0) + ", " + std::to_string(std::llabs(k0 - k_seed)) +
+  if (run.k0 != k_seed)
+    out.notes.push_back("started at slice " + std::to_string(run.k0) + ", " + std::to_string(std::llabs(run.k0 - k_seed)) +
                         " from the seed's: " + start_note);
   std::string cost_note;
   double total_s = 0;
   int total = 0;
   for (const char* kind : {"at the seed", "slid off the seed's slice", "for a longer organ", "recentred window"})
-    if (const auto it = costs.find(kind); it != costs.end()) {
+    if (const auto it = run.costs.find(kind); it != run.costs.end()) {
       char b[96];
       std::snprintf(b, sizeof b, "%s%d %s (%.2f s)", cost_note.empty() ? "" : ", ", it->second.count, kind, it->second.seconds);
       cost_note += b;
