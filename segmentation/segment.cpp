@@ -491,6 +491,110 @@ struct SeededRun {
     std::vector<std::int64_t> held;
   };
 
+  /// The median HU around the seed's position on slice k (the organ's window is centred on it).
+  double hu_at_seed(std::int64_t k) const {
+    return median_inside(c, k, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24));
+  }
+  /// Whether a median lies in the organ's seed range.
+  bool seed_like(double m) const { return m >= p.seed_hu_lo && m <= p.seed_hu_hi; }
+
+  /// Retry 1, the slide: a seed in a section too small to fit (a neck or a fundus tip a few pixels
+  /// across, blurred with the liver around it) starts from the nearest slice within
+  /// seed_slide_mm where the section at the seed's position fits; propagation then comes back
+  /// through the seed's slice. Throws the seed slice's own failure where none fits.
+  Attempt at_or_near_seed(std::int64_t k_seed, double seed_med) {
+    const std::int64_t K = vol.grid.size_vox[2];
+    const int slide = int(std::floor(p.seed_slide_mm / vol.grid.spacing_mm.z() + 1e-9));
+    for (int d = 0;; ++d) {
+      for (int sign : {-1, 1}) {
+        if (d == 0 && sign > 0) continue;
+        k0 = k_seed + sign * d;
+        if (k0 < 0 || k0 >= K) continue;
+        const double m = d == 0 ? seed_med : hu_at_seed(k0);
+        if (!seed_like(m)) continue;
+        kind = d == 0 ? "at the seed" : "slid off the seed's slice";
+        try {
+          return attempt(m, true);
+        } catch (const SegmentationError& e) {
+          if (e.code() != ExitCode::organ_not_found || d >= slide) throw;
+        }
+      }
+      if (d >= slide) {
+        k0 = k_seed;
+        kind = "at the seed";
+        return attempt(seed_med, true);  // reports why the seed's own slice fails
+      }
+    }
+  }
+
+  /// Retry 2, a longer organ: a seed at the organ's tip can start on a neighbour touching it there
+  /// (a bowel loop beside the fundus on a noisy scan: the seed's section fitted the bowel with 13 of
+  /// its 75 pixels on the organ, and both directions followed the bowel for one slice). An organ
+  /// shorter than min_extent_mm along the slices is not one: the starts on the slices within
+  /// seed_slide_mm are tried too, and the longest result is kept. Says why where it moved the start.
+  std::optional<std::string> for_a_longer_organ(Attempt& at, std::int64_t k_seed) {
+    const ImageGrid& g = vol.grid;
+    const std::int64_t K = g.size_vox[2];
+    const int slide = int(std::floor(p.seed_slide_mm / g.spacing_mm.z() + 1e-9));
+    auto extent_mm = [&](const Attempt& a) { return double(a.all.back().k - a.all.front().k + 1) * g.spacing_mm.z(); };
+    if (extent_mm(at) >= p.min_extent_mm) return std::nullopt;
+    const double first_mm = extent_mm(at);
+    const std::int64_t k_first = k0;
+    std::int64_t k_best = k0;
+    for (int d = 1; d <= std::max(1, slide); ++d)
+      for (int sign : {-1, 1}) {
+        k0 = k_seed + sign * d;
+        if (k0 < 0 || k0 >= K) continue;
+        const double m = hu_at_seed(k0);
+        if (!seed_like(m)) continue;
+        kind = "for a longer organ";
+        try {
+          Attempt other = attempt(m, true);
+          if (extent_mm(other) > extent_mm(at)) at = std::move(other), k_best = k0;
+        } catch (const SegmentationError&) {
+          // no organ from this start
+        }
+      }
+    k0 = k_best;
+    if (k0 == k_first) return std::nullopt;
+    char b[160];
+    std::snprintf(b, sizeof b, "the start at the seed gave an organ %.0f mm long across the slices (under %.0f mm)",
+                  first_mm, p.min_extent_mm);
+    return std::string(b);
+  }
+
+  /// Retry 3, the recentred window: the organ's median over every slice found is a steadier centre
+  /// for the window than one slice around the seed (seeds a slice apart gave windows 6 HU apart on
+  /// a real scan); a second pass with it makes the result depend less on where the seed was
+  /// placed. The median of a pass depends on its window (a lower window leaves out the brighter
+  /// rim), so this repeats until the centre moves by at most 1.5 HU (three passes at most).
+  void recentre(Attempt& at) {
+    for (int pass = 0; pass < 3; ++pass) {
+      bool moved = false;
+      if (const std::optional<double> median = sections_median_hu(vol, c, at.all)) {
+        const double m3 = *median;
+        if (seed_like(m3) && std::abs(m3 - at.mu) > 1.5) {
+          kind = "recentred window";
+          try {
+            Attempt second = attempt(m3, false);
+            // A window a few HU away changes the outline a little; a second pass that loses a
+            // fifth of the organ or more (a section in the organ's middle fitted short on a noisy
+            // slice, after which propagation ended at the jump back) is not the steadier one.
+            auto volume = [](const Attempt& a) {
+              double v = 0;
+              for (const auto& sc : a.all) v += std::abs(polygon_area(sc.pts));
+              return v;
+            };
+            if (volume(second) >= kMinRecentredVolumeFraction * volume(at)) at = std::move(second), moved = true;
+          } catch (const SegmentationError&) {
+            // keep the first pass
+          }
+        }
+      }
+      if (!moved) break;
+    }
+  }
+
   /// One attempt, timed under `kind`.
   Attempt attempt(double mu, bool refine_on_seed_slice) {
     AttemptCost& cost = costs[kind];
@@ -721,116 +825,21 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   const Point2 s = to_slice_mm(c, ijk);
   const double noise_hu = slice_noise_hu(c, k0, s, 40.0);
   adapt_to_noise(p, c, noise_hu);
-  // What the seed's neighbourhood looks like decides the organ's window: the median HU around
-  // the seed's position on slice k, and whether it lies in the organ's seed range.
-  auto hu_at_seed = [&](std::int64_t k) { return median_inside(c, k, seg::circle(s, std::max(p.seed_radius_mm, c.sx), 24)); };
-  auto seed_like = [&](double m) { return m >= p.seed_hu_lo && m <= p.seed_hu_hi; };
-  const double seed_med = hu_at_seed(k0);
-  if (!seed_like(seed_med)) {
+  SeededRun run{vol, c, p, ijk, seed_lps, s, std::max(p.roi_margin_mm, std::sqrt(p.max_area_mm2 / M_PI) + 10.0), parallel,
+                progress};
+  run.k0 = k0;
+  const double seed_med = run.hu_at_seed(k0);
+  if (!run.seed_like(seed_med)) {
     char b[256];
     std::snprintf(b, sizeof b, "%s seed %s lies in tissue of median %.0f HU, outside the %s range [%.0f, %.0f] HU",
                   p.organ.c_str(), fmt_mm(seed_lps).c_str(), seed_med, p.organ.c_str(), p.seed_hu_lo, p.seed_hu_hi);
     throw SegmentationError(ExitCode::bad_seed, b,
                             "place the seed inside the " + p.organ + " (not in air, fat, bone or a neighbouring organ)");
   }
-  const std::int64_t K = g.size_vox[2];
-  SeededRun run{vol, c, p, ijk, seed_lps, s, std::max(p.roi_margin_mm, std::sqrt(p.max_area_mm2 / M_PI) + 10.0), parallel,
-                progress};
-  run.k0 = k0;
-  // A seed in a section too small to fit (a neck or a fundus tip a few pixels across, blurred
-  // with the liver around it) starts from the nearest slice within seed_slide_mm where the
-  // section at the seed's position fits; propagation then comes back through the seed's slice.
-  Attempt at;
   const std::int64_t k_seed = k0;
-  const int slide = int(std::floor(p.seed_slide_mm / g.spacing_mm.z() + 1e-9));
-  for (int d = 0;; ++d) {
-    bool fitted = false;
-    for (int sign : {-1, 1}) {
-      if (d == 0 && sign > 0) continue;
-      run.k0 = k_seed + sign * d;
-      if (run.k0 < 0 || run.k0 >= K) continue;
-      const double m = d == 0 ? seed_med : hu_at_seed(run.k0);
-      if (!seed_like(m)) continue;
-      run.kind = d == 0 ? "at the seed" : "slid off the seed's slice";
-      try {
-        at = run.attempt(m, true);
-        fitted = true;
-        break;
-      } catch (const SegmentationError& e) {
-        if (e.code() != ExitCode::organ_not_found || d >= slide) throw;
-      }
-    }
-    if (fitted) break;
-    if (d >= slide) {
-      run.k0 = k_seed;
-      run.kind = "at the seed";
-      at = run.attempt(seed_med, true);  // reports why the seed's own slice fails
-      break;
-    }
-  }
-
-  // A seed at the organ's tip can start on a neighbour touching it there (a bowel loop beside the
-  // fundus on a noisy scan: the seed's section fitted the bowel with 13 of its 75 pixels on the
-  // organ, and both directions followed the bowel for one slice). A gallbladder shorter than
-  // min_extent_mm along the slices is not one: the starts on the slices within seed_slide_mm are
-  // tried too, and the longest result is kept.
-  std::string start_note = "the section at the seed was too small to fit";
-  auto extent_mm = [&](const Attempt& a) { return double(a.all.back().k - a.all.front().k + 1) * g.spacing_mm.z(); };
-  if (extent_mm(at) < p.min_extent_mm) {
-    const double first_mm = extent_mm(at);
-    const std::int64_t k_first = run.k0;
-    std::int64_t k_best = run.k0;
-    for (int d = 1; d <= std::max(1, slide); ++d)
-      for (int sign : {-1, 1}) {
-        run.k0 = k_seed + sign * d;
-        if (run.k0 < 0 || run.k0 >= K) continue;
-        const double m = hu_at_seed(run.k0);
-        if (!seed_like(m)) continue;
-        run.kind = "for a longer organ";
-        try {
-          Attempt other = run.attempt(m, true);
-          if (extent_mm(other) > extent_mm(at)) at = std::move(other), k_best = run.k0;
-        } catch (const SegmentationError&) {
-          // no organ from this start
-        }
-      }
-    run.k0 = k_best;
-    if (run.k0 != k_first) {
-      char b[160];
-      std::snprintf(b, sizeof b, "the start at the seed gave an organ %.0f mm long across the slices (under %.0f mm)",
-                    first_mm, p.min_extent_mm);
-      start_note = b;
-    }
-  }
-  // The organ's median over every slice found is a steadier centre for the window than one
-  // slice around the seed (seeds a slice apart gave windows 6 HU apart on a real scan); a
-  // second pass with it makes the result depend less on where the seed was placed. The median
-  // of a pass depends on its window (a lower window leaves out the brighter rim), so this repeats
-  // until the centre moves by at most 1.5 HU (three passes at most).
-  for (int recentre = 0; recentre < 3; ++recentre) {
-    bool moved = false;
-    if (const std::optional<double> median = sections_median_hu(vol, c, at.all)) {
-      const double m3 = *median;
-      if (seed_like(m3) && std::abs(m3 - at.mu) > 1.5) {
-        run.kind = "recentred window";
-        try {
-          Attempt second = run.attempt(m3, false);
-          // A window a few HU away changes the outline a little; a second pass that loses a fifth
-          // of the organ or more (a section in the organ's middle fitted short on a noisy slice,
-          // after which propagation ended at the jump back) is not the steadier one.
-          auto volume = [](const Attempt& a) {
-            double v = 0;
-            for (const auto& sc : a.all) v += std::abs(polygon_area(sc.pts));
-            return v;
-          };
-          if (volume(second) >= kMinRecentredVolumeFraction * volume(at)) at = std::move(second), moved = true;
-        } catch (const SegmentationError&) {
-          // keep the first pass
-        }
-      }
-    }
-    if (!moved) break;
-  }
+  Attempt at = run.at_or_near_seed(k_seed, seed_med);
+  const std::optional<std::string> start_note = run.for_a_longer_organ(at, k_seed);
+  run.recentre(at);
   const auto& all = at.all;
   const double lo = at.lo, hi = at.hi, mu = at.mu;
   const std::string& note_up = at.note_up;
@@ -842,7 +851,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   char win[192];
   std::snprintf(win, sizeof win, "organ window %.0f to %.0f HU (median %.0f HU); noise %.0f HU, region smoothing %.2f px",
                 lo, hi, mu, noise_hu, region_sigma_mm(p, c) / std::min(c.sx, c.sy));
-  out.notes = {"towards k = 0: " + note_down, "towards k = " + std::to_string(K - 1) + ": " + note_up, win};
+  out.notes = {"towards k = 0: " + note_down, "towards k = " + std::to_string(g.size_vox[2] - 1) + ": " + note_up, win};
   out.window_lo_hu = lo, out.window_hi_hu = hi, out.region_sigma_mm = region_sigma_mm(p, c);
   if (!at.held.empty()) {
     std::string ks;
@@ -851,7 +860,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
   }
   if (run.k0 != k_seed)
     out.notes.push_back("started at slice " + std::to_string(run.k0) + ", " + std::to_string(std::llabs(run.k0 - k_seed)) +
-                        " from the seed's: " + start_note);
+                        " from the seed's: " + start_note.value_or("the section at the seed was too small to fit"));
   std::string cost_note;
   double total_s = 0;
   int total = 0;
