@@ -6,7 +6,9 @@
 
 #include <toml++/toml.h>
 
+#include <algorithm>
 #include <cmath>
+#include <initializer_list>
 #include <set>
 #include <string>
 
@@ -40,6 +42,18 @@ void get(const toml::table& t, const std::string& organ, Seen& seen, const char*
   if (auto b = n->value<bool>()) v = *b;
   else throw CaseFileError("organ preset '" + organ + "." + key + "' must be true or false", {});
 }
+void get_choice(const toml::table& t, const std::string& organ, Seen& seen, const char* key, std::string& v,
+                std::initializer_list<const char*> allowed) {
+  seen.insert(key);
+  const toml::node* n = t.get(key);
+  if (!n) return;
+  std::string list;
+  for (const char* a : allowed) list += (list.empty() ? "" : ", ") + std::string("\"") + a + "\"";
+  const auto s = n->value<std::string>();
+  if (!s || std::none_of(allowed.begin(), allowed.end(), [&](const char* a) { return *s == a; }))
+    throw CaseFileError("organ preset '" + organ + "." + key + "' must be one of " + list, {});
+  v = *s;
+}
 void get_range(const toml::table& t, const std::string& organ, Seen& seen, const char* key, double& lo, double& hi) {
   seen.insert(key);
   const toml::node* n = t.get(key);
@@ -53,6 +67,7 @@ void get_range(const toml::table& t, const std::string& organ, Seen& seen, const
 }
 
 void read_keys(const toml::table& t, const std::string& organ, Seen& seen, OrganPreset& p) {
+  get_choice(t, organ, seen, "driver", p.driver, {"seeded", "airway"});
   get_range(t, organ, seen, "seed_hu_range", p.seed_hu_lo, p.seed_hu_hi);
   get(t, organ, seen, "seed_radius_mm", p.seed_radius_mm);
   get(t, organ, seen, "region_below_hu", p.region_below_hu);

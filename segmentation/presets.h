@@ -15,6 +15,9 @@ struct OrganPreset {
   std::string organ;
   std::uint8_t label{};
   bool needs_seed = true;
+  /// How the organ is found: "seeded" (from the seed, slice to slice both ways) or "airway"
+  /// (without a seed: the most cranial round midline air lumen, followed caudally).
+  std::string driver;
   double seed_hu_lo{}, seed_hu_hi{};          ///< HU range a seed's neighbourhood must have
   double seed_radius_mm{};                    ///< radius of that neighbourhood, mm
   double region_below_hu{}, region_above_hu{}; ///< pressure window around the organ mean, HU

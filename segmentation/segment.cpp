@@ -878,7 +878,7 @@ OrganSegmentation segment_seeded(const Volume& vol, const OrganRequest& req, con
 }
 
 // ---------------------------------------------------------------------------------------------
-// Trachea: no seed. The air lumen that is round, near the body midline and runs along the body
+// Airway driver (the trachea): no seed. The air lumen that is round, near the body midline and runs along the body
 // for at least min_length_mm is the trachea; it is followed caudally until it divides (carina).
 
 struct Component {
@@ -1018,7 +1018,7 @@ double body_centre_l(const SliceCtx& c, std::int64_t k) {
   return n ? sum / double(n) : c.vol.grid.index_to_lps_mm({c.W / 2.0, c.H / 2.0, double(k)}).x();
 }
 
-OrganSegmentation segment_trachea(const Volume& vol, const OrganPreset& p, bool parallel, Progress& progress) {
+OrganSegmentation segment_airway(const Volume& vol, const OrganPreset& p, bool parallel, Progress& progress) {
   const ImageGrid& g = vol.grid;
   SliceCtx c(vol);
   OrganSegmentation out;
@@ -1275,9 +1275,10 @@ SegmentationResult segment_organs(const Volume& volume, const std::vector<OrganR
   res.organs.resize(organs.size());
   auto one = [&](std::size_t i) {
     const OrganPreset& p = *ps[i];
-    res.organs[i] = (p.needs_seed || organs[i].seed_lps_mm || organs[i].seed_ijk)
-                        ? segment_seeded(volume, organs[i], p, options.parallel, progress)
-                        : segment_trachea(volume, p, options.parallel, progress);
+    // The registry's driver; an organ given a seed is segmented from it whatever its driver.
+    const bool seeded = p.driver != "airway" || organs[i].seed_lps_mm || organs[i].seed_ijk;
+    res.organs[i] = seeded ? segment_seeded(volume, organs[i], p, options.parallel, progress)
+                           : segment_airway(volume, p, options.parallel, progress);
   };
   if (options.parallel && organs.size() > 1)
     tbb::parallel_for(std::size_t(0), organs.size(), one);

@@ -210,6 +210,12 @@ TEST(OrganRegistry, SegmentPresetsStartFromTheRegistrysDefaultsTable) {
   EXPECT_TRUE(has(e, "unknown organ preset key 'segment_defaults.kapa'")) << e;
   e = registry_error("[segment_defaults]\ngvf_mu = -1.0\n");
   EXPECT_TRUE(has(e, "must be positive")) << e;
+  // Which driver finds an organ is the registry's too: the trachea's airway search, seeded otherwise.
+  EXPECT_EQ(builtin.at("trachea").driver, "airway");
+  EXPECT_EQ(builtin.at("gallbladder").driver, d.driver);
+  EXPECT_EQ(d.driver, "seeded");
+  e = registry_error("[cyst]\nlabel = 9\nmesh = \"none\"\n[cyst.segment]\ndriver = \"snake\"\n");
+  EXPECT_TRUE(has(e, "cyst.driver' must be one of \"seeded\", \"airway\"")) << e;
 }
 
 TEST(OrganRegistry, PreferredPathsAreIncisionsThenDissectionsThenCentrelinesOfEveryOrgan) {
