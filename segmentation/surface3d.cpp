@@ -266,95 +266,98 @@ Surface3dResult evolve_surface3d(const Volume& vol, const BoxMask& start, const 
   const double speed = std::max(o.region_weight + o.gvf_weight, 1e-6);
   const double dt = 0.9 * std::min(0.5 * hmin / speed, o.curvature_mm > 0 ? 1 / (2 * o.curvature_mm * inv2) : 1e9);
 
-  // The points a pass visits: the whole box, or a list of those near the surface (the narrow
-  // band; points outside it keep their value through the pass, so visiting only the list gives
-  // the same result as visiting the box and skipping them).
-  struct Pt {
-    std::size_t p;
-    int x, y, z;
+  // The points a pass visits, as runs of a row: those with |φ| ≤ `within` (the narrow band; every
+  // point where `within` is infinite). A pass writes its runs' new values to tmp, then copies
+  // them back: points outside the runs keep their value, as in a pass over the box that skips them.
+  struct Run {
+    int y, z, x0, x1;  // x0 ≤ x < x1
   };
-  auto collect = [&](const std::vector<float>& a, double within, std::vector<Pt>& list) {
-    list.clear();
+  auto runs_within = [&](double within, std::vector<Run>& runs) {
+    runs.clear();
     for (int z = 0; z < b.nz; ++z)
-      for (int y = 0; y < b.ny; ++y)
-        for (int x = 0; x < b.nx; ++x) {
-          const std::size_t p = b.at(x, y, z);
-          if (std::abs(a[p]) <= within) list.push_back({p, x, y, z});
+      for (int y = 0; y < b.ny; ++y) {
+        const float* P = phi.data() + b.at(0, y, z);
+        for (int x = 0; x < b.nx;) {
+          if (!(std::abs(P[x]) <= within)) {
+            ++x;
+            continue;
+          }
+          const int x0 = x;
+          while (x < b.nx && std::abs(P[x]) <= within) ++x;
+          runs.push_back({y, z, x0, x});
         }
+      }
   };
-  auto over = [&](const std::vector<Pt>& list, auto&& f) {
+  auto over_runs = [&](const std::vector<Run>& runs, auto&& f) {
     if (o.parallel)
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, list.size(), 2048), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) f(list[i]);
+      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, runs.size(), 64), [&](const tbb::blocked_range<std::size_t>& r) {
+        for (std::size_t i = r.begin(); i != r.end(); ++i) f(runs[i]);
       });
     else
-      for (const Pt& q : list) f(q);
+      for (const Run& q : runs) f(q);
+  };
+  std::vector<float> tmp(n);
+  auto keep_runs = [&](const std::vector<Run>& runs) {
+    over_runs(runs, [&](const Run& q) {
+      const std::size_t r = b.at(q.x0, q.y, q.z);
+      std::copy(tmp.begin() + std::ptrdiff_t(r), tmp.begin() + std::ptrdiff_t(r + std::size_t(q.x1 - q.x0)),
+                phi.begin() + std::ptrdiff_t(r));
+    });
+  };
+  /// Rows either side of row (y, z), clamped at the box's faces (a neighbour row past a face is the
+  /// row itself: one-sided differences there).
+  struct Rows {
+    const float *c, *ym, *yp, *zm, *zp, *ypzp, *ypzm, *ymzp, *ymzm;
+  };
+  auto rows_of = [&](int y, int z) {
+    const int ym = std::max(y - 1, 0), yp = std::min(y + 1, b.ny - 1), zm = std::max(z - 1, 0), zp = std::min(z + 1, b.nz - 1);
+    const float* F0 = phi.data();
+    return Rows{F0 + b.at(0, y, z),   F0 + b.at(0, ym, z),  F0 + b.at(0, yp, z),  F0 + b.at(0, y, zm), F0 + b.at(0, y, zp),
+                F0 + b.at(0, yp, zp), F0 + b.at(0, yp, zm), F0 + b.at(0, ym, zp), F0 + b.at(0, ym, zm)};
+  };
+  /// f(x, x − 1, x + 1) along a run, the x-neighbours clamped at the row's ends; the interior loop
+  /// has no clamps, so that it can vectorise.
+  auto along = [&](const Run& q, auto&& f) __attribute__((always_inline)) {
+    int x = q.x0;
+    if (x == 0) f(0, 0, std::min(1, b.nx - 1)), ++x;
+    const int end = std::min(q.x1, b.nx - 1);
+    for (; x < end; ++x) f(x, x - 1, x + 1);
+    if (x < q.x1) f(x, x - 1, x);  // x = nx − 1 (nx ≥ 2 here)
   };
 
-
   // Reinitialisation towards a signed distance (Sussman, Smereka & Osher 1994; Godunov upwind),
-  // keeping the zero level where it is; over the box, or where |φ| ≤ `within` at the start.
-  std::vector<float> tmp(n), phi0;
-  std::vector<Pt> near;
+  // keeping the zero level where it is; over the points with |φ| ≤ `within` at the start.
+  std::vector<Run> near;
   std::vector<double> S;  // the sign of φ at the start of a reinitialisation, smoothed
   auto reinit = [&](int iters, double within) {
-    phi0 = phi;
     S.resize(n);
     const double dtr = 0.5 * hmin;
-    // Godunov's upwind |∇φ|² along one axis (c the point, m and pl its neighbours; one-sided at
-    // the box's faces, where the neighbour is the point itself).
+    // Godunov's upwind |∇φ|² along one axis (c the point, m and pl its neighbours).
     auto axis = [](double s, double c, double m, double pl, double hh) __attribute__((always_inline)) {
       const double a = (c - m) / hh, bq = (pl - c) / hh;
       const double ap = std::max(a, 0.0), am = std::min(a, 0.0), bp = std::max(bq, 0.0), bm = std::min(bq, 0.0);
       const double pos = std::max(ap * ap, bm * bm), neg = std::max(am * am, bp * bp);  // (both: no branch)
       return s > 0 ? pos : neg;
     };
-    auto update = [&](std::size_t p, double c, double xm, double xp, double ym, double yp, double zm, double zp)
-                      __attribute__((always_inline)) {
-      double g2 = 0;
-      g2 += axis(S[p], c, xm, xp, b.hx);
-      g2 += axis(S[p], c, ym, yp, b.hy);
-      g2 += axis(S[p], c, zm, zp, b.hz);  // (0 on a single slice: both neighbours are the point)
-      tmp[p] = float(c - dtr * S[p] * (std::sqrt(g2) - 1));
-    };
-    auto point = [&](const Pt& q) {
-      const std::size_t p = q.p;
-      const int x = q.x, y = q.y, z = q.z;
-      const double c = phi[p];
-      update(p, c, x > 0 ? phi[p - 1] : c, x < b.nx - 1 ? phi[p + 1] : c, y > 0 ? phi[b.at(x, y - 1, z)] : c,
-             y < b.ny - 1 ? phi[b.at(x, y + 1, z)] : c, z > 0 ? phi[b.at(x, y, z - 1)] : c,
-             z < b.nz - 1 ? phi[b.at(x, y, z + 1)] : c);
-    };
-    auto sign = [&](std::size_t p) { S[p] = phi0[p] / std::sqrt(double(phi0[p]) * phi0[p] + hmin * hmin); };
-    const bool all = !std::isfinite(within);
-    if (all) {
-      for (std::size_t p = 0; p < n; ++p) sign(p);
-    } else {
-      collect(phi0, within, near);
-      for (const Pt& q : near) sign(q.p);
-    }
+    runs_within(within, near);
+    over_runs(near, [&](const Run& q) {
+      const std::size_t r = b.at(0, q.y, q.z);
+      for (int x = q.x0; x < q.x1; ++x) S[r + x] = phi[r + x] / std::sqrt(double(phi[r + x]) * phi[r + x] + hmin * hmin);
+    });
     for (int it = 0; it < iters; ++it) {
-      if (all) {
-        // Row by row; a neighbour row past the box's face is the row itself (one-sided there).
-        for_slices(b, o.parallel, [&](int z) {
-          for (int y = 0; y < b.ny; ++y) {
-            const std::size_t r = b.at(0, y, z);
-            const float* P = phi.data() + r;
-            const float* Pym = phi.data() + b.at(0, std::max(y - 1, 0), z);
-            const float* Pyp = phi.data() + b.at(0, std::min(y + 1, b.ny - 1), z);
-            const float* Pzm = phi.data() + b.at(0, y, std::max(z - 1, 0));
-            const float* Pzp = phi.data() + b.at(0, y, std::min(z + 1, b.nz - 1));
-            const int last = b.nx - 1;
-            update(r, P[0], P[0], P[std::min(1, last)], Pym[0], Pyp[0], Pzm[0], Pzp[0]);
-            for (int x = 1; x < last; ++x) update(r + x, P[x], P[x - 1], P[x + 1], Pym[x], Pyp[x], Pzm[x], Pzp[x]);
-            if (last > 0) update(r + last, P[last], P[last - 1], P[last], Pym[last], Pyp[last], Pzm[last], Pzp[last]);
-          }
+      over_runs(near, [&](const Run& q) {
+        const Rows R = rows_of(q.y, q.z);
+        const std::size_t r = b.at(0, q.y, q.z);
+        along(q, [&](int x, int xm, int xp) __attribute__((always_inline)) {
+          const double c = R.c[x];
+          double g2 = 0;
+          g2 += axis(S[r + x], c, R.c[xm], R.c[xp], b.hx);
+          g2 += axis(S[r + x], c, R.ym[x], R.yp[x], b.hy);
+          g2 += axis(S[r + x], c, R.zm[x], R.zp[x], b.hz);  // (0 on a single slice: both neighbours are the point)
+          tmp[r + x] = float(c - dtr * S[r + x] * (std::sqrt(g2) - 1));
         });
-        phi.swap(tmp);
-      } else {
-        over(near, point);
-        over(near, [&](const Pt& q) { phi[q.p] = tmp[q.p]; });
-      }
+      });
+      keep_runs(near);
     }
   };
   reinit(int(std::ceil(o.max_grow_mm / (0.5 * hmin))) + 4, std::numeric_limits<double>::infinity());
@@ -406,50 +409,20 @@ Surface3dResult evolve_surface3d(const Volume& vol, const BoxMask& start, const 
   const int check_every = std::max(10, int(std::ceil(std::min(b.hx, b.hy) / dt)));
   const double band_mm = 3 * std::max({b.hx, b.hy, b.nz > 1 ? b.hz : b.hx});
   std::int64_t last = count_inside(), stable_since = 0;
-  // The narrow band as runs of a row (points outside it only carry the distance, kept up by the
-  // reinitialisation over the whole box, and the zero level moves far less than the band between
-  // two reinitialisations): rebuilt after each reinitialisation, the only points a step moves.
-  struct Run {
-    int y, z, x0, x1;  // x0 ≤ x < x1
-  };
+  // The narrow band (points outside it only carry the distance, kept up by the reinitialisation
+  // over the whole box, and the zero level moves far less than the band between two
+  // reinitialisations): rebuilt after each reinitialisation, the only points a step moves.
   std::vector<Run> band;
-  auto collect_band = [&] {
-    band.clear();
-    for (int z = 0; z < b.nz; ++z)
-      for (int y = 0; y < b.ny; ++y) {
-        const float* P = phi.data() + b.at(0, y, z);
-        for (int x = 0; x < b.nx;) {
-          if (std::abs(P[x]) > band_mm) {
-            ++x;
-            continue;
-          }
-          const int x0 = x;
-          while (x < b.nx && std::abs(P[x]) <= band_mm) ++x;
-          band.push_back({y, z, x0, x});
-        }
-      }
-  };
-  auto over_band = [&](auto&& f) {
-    if (o.parallel)
-      tbb::parallel_for(tbb::blocked_range<std::size_t>(0, band.size(), 64), [&](const tbb::blocked_range<std::size_t>& r) {
-        for (std::size_t i = r.begin(); i != r.end(); ++i) f(band[i]);
-      });
-    else
-      for (const Run& q : band) f(q);
-  };
   const bool curve = o.curvature_mm > 0;
   std::vector<float> core_f(core.begin(), core.end());  // (as float: one element width with φ in the loop)
   // One step along a run. Rows past the box's faces are the row itself and x-neighbours past them
   // the point itself (one-sided differences there); branches are selects, so that the interior
   // loop vectorises.
   auto step_run = [&](const Run& q) {
-    const int y = q.y, z = q.z;
-    const int ym = std::max(y - 1, 0), yp = std::min(y + 1, b.ny - 1), zm = std::max(z - 1, 0), zp = std::min(z + 1, b.nz - 1);
-    const float* F0 = phi.data();
-    const std::size_t r = b.at(0, y, z);
-    const float *P = F0 + r, *Pym = F0 + b.at(0, ym, z), *Pyp = F0 + b.at(0, yp, z), *Pzm = F0 + b.at(0, y, zm),
-                *Pzp = F0 + b.at(0, y, zp), *Pypzp = F0 + b.at(0, yp, zp), *Pypzm = F0 + b.at(0, yp, zm),
-                *Pymzp = F0 + b.at(0, ym, zp), *Pymzm = F0 + b.at(0, ym, zm);
+    const Rows R = rows_of(q.y, q.z);
+    const std::size_t r = b.at(0, q.y, q.z);
+    const float *P = R.c, *Pym = R.ym, *Pyp = R.yp, *Pzm = R.zm, *Pzp = R.zp, *Pypzp = R.ypzp, *Pypzm = R.ypzm,
+                *Pymzp = R.ymzp, *Pymzm = R.ymzm;
     const float *Fr = Freg.data() + r, *Ur = u.data() + r, *Vr = v.data() + r, *Wr = w.data() + r,
                 *Wcr = Wc.data() + r, *Lr = limit.data() + r;
     const float* Cr = core_f.data() + r;
@@ -493,28 +466,21 @@ Surface3dResult evolve_surface3d(const Volume& vol, const BoxMask& start, const 
       out[x] = float(std::abs(c) > band_mm ? c : nv);  // a point that left the band stays
     };
     auto cells = [&](auto with_curvature) {
-      int x = q.x0;
-      if (x == 0) cell(with_curvature, 0, 0, std::min(1, b.nx - 1)), ++x;
-      const int end = std::min(q.x1, b.nx - 1);
-      for (; x < end; ++x) cell(with_curvature, x, x - 1, x + 1);
-      if (x < q.x1) cell(with_curvature, x, x - 1, x);  // x = nx − 1 (nx ≥ 2 here)
+      along(q, [&](int x, int xm, int xp) __attribute__((always_inline)) { cell(with_curvature, x, xm, xp); });
     };
     if (curve) cells(std::true_type{});
     else cells(std::false_type{});
   };
-  collect_band();
+  runs_within(band_mm, band);
   int step = 0;
   for (; step < o.max_steps; ++step) {
-    over_band(step_run);
-    over_band([&](const Run& q) {
-      const std::size_t r = b.at(q.x0, q.y, q.z);
-      std::copy(tmp.begin() + std::ptrdiff_t(r), tmp.begin() + std::ptrdiff_t(r + std::size_t(q.x1 - q.x0)), phi.begin() + std::ptrdiff_t(r));
-    });
+    over_runs(band, step_run);
+    keep_runs(band);
     // Every 5 steps the distance is restored near the surface, every 20 over the whole box (the
     // zero level moves under a pixel in between); the local means change slowly with the surface.
     // Between two reinitialisations only the band's points move.
-    if ((step + 1) % 20 == 0) reinit(2, std::numeric_limits<double>::infinity()), local_region(), collect_band();
-    else if ((step + 1) % 5 == 0) reinit(2, 2 * band_mm), collect_band();
+    if ((step + 1) % 20 == 0) reinit(2, std::numeric_limits<double>::infinity()), local_region(), runs_within(band_mm, band);
+    else if ((step + 1) % 5 == 0) reinit(2, 2 * band_mm), runs_within(band_mm, band);
     if ((step + 1) % check_every == 0) {
       const std::int64_t now = count_inside();
       if (std::llabs(now - last) <= std::max<std::int64_t>(1, last / 2000)) {

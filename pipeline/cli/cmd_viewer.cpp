@@ -144,7 +144,8 @@ int cmd_preview(const PreviewFlags& f) {
     throw InputError(ExitCode::input_not_found, "nothing to show: no meshes and no label map", out,
                      "run `organsmith run --out " + f.out + "` first");
 
-  // The guidance path: the one asked for, else the incision, the dissection, the centreline.
+  const OrganRegistry registry = registry_of_output(out);
+  // The guidance path: the one asked for, else the registry's preferred the run made.
   const ScenePath* chosen = nullptr;
   if (!f.path.empty()) {
     for (const auto& p : os.scene.paths)
@@ -156,7 +157,7 @@ int cmd_preview(const PreviewFlags& f) {
                        names.empty() ? "run `organsmith guide " + f.out + "` first" : "paths there: " + names);
     }
   } else {
-    for (const auto& name : registry_of_output(out).preferred_path_names())
+    for (const auto& name : registry.preferred_path_names())
       for (const auto& p : os.scene.paths)
         if (!chosen && p.line.name == name) chosen = &p;
     if (!chosen && !os.scene.paths.empty()) chosen = &os.scene.paths.front();
@@ -170,7 +171,6 @@ int cmd_preview(const PreviewFlags& f) {
 
   // The contact surfaces: each organ's haptic surface of the registry (or, where the mesh stage
   // has not run, the organ's label-map surface), felt with its region's calibrated law.
-  const OrganRegistry registry = registry_of_output(out);
   std::vector<SurfaceMesh> surfaces;
   std::vector<physics::StressTable> tables;
   std::string felt;
