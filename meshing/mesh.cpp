@@ -111,6 +111,31 @@ std::vector<std::int32_t> components(const std::vector<std::uint8_t>& on, const 
   return id;
 }
 
+/// Drops the voxels one voxel thin: those with neither neighbour inside along some axis (a plate
+/// one slice thick sticking out past both neighbouring slices' sections, a spur one pixel wide).
+/// No smooth surface at the grid's resolution carries them: a surface round a part one voxel
+/// thick folds within half a voxel. Returns the voxels dropped (indices into the mask).
+std::vector<std::int64_t> drop_one_voxel_thin(std::vector<std::uint8_t>& mask, const std::array<std::int64_t, 3>& n) {
+  const std::int64_t st[3] = {1, n[0], n[0] * n[1]};
+  std::vector<std::int64_t> thin;
+  for (std::int64_t k = 0, x = 0; k < n[2]; ++k)
+    for (std::int64_t j = 0; j < n[1]; ++j)
+      for (std::int64_t i = 0; i < n[0]; ++i, ++x) {
+        if (!mask[std::size_t(x)]) continue;
+        const std::int64_t c[3] = {i, j, k};
+        for (int a = 0; a < 3; ++a) {
+          if (n[a] < 3) continue;
+          const bool lo = c[a] > 0 && mask[std::size_t(x - st[a])], hi = c[a] + 1 < n[a] && mask[std::size_t(x + st[a])];
+          if (!lo && !hi) {
+            thin.push_back(x);
+            break;
+          }
+        }
+      }
+  for (const std::int64_t x : thin) mask[std::size_t(x)] = 0;
+  return thin;
+}
+
 Prepared prepare(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOptions& o, std::vector<std::string>& warnings) {
   Prepared p;
   const auto& g = lm.grid;
@@ -145,6 +170,8 @@ Prepared prepare(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOption
     if (p.b1[a] == N[a] - 1) warnings.push_back(spec.name + " touches the image border at the " + names[a][1] + "; capped flat there");
   }
 
+  // Band-limited to what the label carries: along each axis, σ is a fraction of the voxel spacing
+  // (finer detail is the voxels' staircase), capped along thick-slice axes.
   const double sigma_mm_max = o.max_smoothing_sigma_mm;
   Eigen::Vector3d sigma_samples;
   const double coarsest_mm = std::max({s[0], s[1], s[2]});
@@ -177,6 +204,17 @@ Prepared prepare(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOption
           mask[std::size_t(i + n[0] * (j + n[1] * k))] = 1;
       }
 
+  std::int64_t thin = 0;  // label voxels dropped as one voxel thin (not the copies past a cut side)
+  if (o.drop_thin_voxels)
+    for (const std::int64_t x : drop_one_voxel_thin(mask, n)) {
+      const std::int64_t c[3] = {p.lo[0] + x % n[0], p.lo[1] + (x / n[0]) % n[1], p.lo[2] + x / (n[0] * n[1])};
+      bool label_voxel = true;
+      for (int a = 0; a < 3; ++a) label_voxel = label_voxel && c[a] >= p.b0[a] && c[a] <= p.b1[a];
+      thin += label_voxel;
+    }
+  if (thin > 0)
+    warnings.push_back(spec.name + ": " + std::to_string(thin) + " voxel(s) (" + fmt(double(thin) * s.prod() / 1000.0) +
+                       " ml) one voxel thin along an axis not meshed: no smooth surface at this grid carries them");
   // Largest component; then fill enclosed cavities (they would become inner shells).
   std::vector<std::int64_t> sizes;
   const auto comp = components(mask, n, sizes, true);
@@ -221,8 +259,8 @@ Prepared prepare(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOption
       }
   p.label_volume_mm3 = double(kept) * voxel_mm3;
   p.dropped_volume_mm3 = double(std::max<std::int64_t>(0, count - (kept - filled))) * voxel_mm3;
-  if (p.dropped_volume_mm3 > 0)
-    warnings.push_back(spec.name + ": " + fmt(p.dropped_volume_mm3 / 1000.0) +
+  if (const double apart_mm3 = p.dropped_volume_mm3 - double(thin) * voxel_mm3; apart_mm3 > 0.5 * voxel_mm3)
+    warnings.push_back(spec.name + ": " + fmt(apart_mm3 / 1000.0) +
                        " ml outside the largest connected component not meshed");
   if (kept < 8)
     throw InputError(ExitCode::mesh_input,
@@ -618,7 +656,7 @@ std::string failure_text(const OrganMesh& m) {
 }
 
 /// Meshes one organ; where a gate fails, tries the remedies in turn — a smoother iso-surface
-/// (σ × 1.6, up to 2.5 mm along thick slices: the staircase of thin or thick slices is what
+/// (σ and its cap × 1.6: the staircase of thin or thick slices is what
 /// leaves narrow triangles), a finer edge (× 0.8; a coarse polygon loses a thin tube's volume),
 /// both, then other samplings of the smoother surface (a 1.25× edge; σ × 1.6 of the coarsest
 /// spacing on every axis; σ × 2.56) — and keeps the
@@ -645,7 +683,7 @@ OrganMesh mesh_with_remedies(const LabelMap& labels, const MeshOrganSpec& spec, 
     const Remedy& rem = kRemedies[r];
     const bool smoother = rem.sigma_factor > 1.0, other_edge = rem.edge_factor != 1.0;
     o.smoothing_sigma_vox = options.smoothing_sigma_vox * rem.sigma_factor;
-    o.max_smoothing_sigma_mm = smoother ? std::max(options.max_smoothing_sigma_mm, 2.5) : options.max_smoothing_sigma_mm;
+    o.max_smoothing_sigma_mm = options.max_smoothing_sigma_mm * rem.sigma_factor;
     o.edge_mm = options.edge_mm * rem.edge_factor;
     o.smoothing_isotropic = rem.isotropic;
     std::string what = smoother ? std::string(rem.isotropic ? "isotropically " : "") + "smoother surface (σ " +

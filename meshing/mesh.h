@@ -57,8 +57,17 @@ struct MeshOptions {
   /// registry (data/organs.toml, `mesh_spec`).
   std::vector<MeshOrganSpec> organs;
   double edge_mm = 1.5;              ///< target surface edge length (mm), default 1.5
-  double smoothing_sigma_vox = 0.6;  ///< Gaussian σ of the mask before iso-surfacing, in voxels of each axis
-  double max_smoothing_sigma_mm = 1.5;  ///< cap on σ along thick-slice axes (mm)
+  /// Gaussian σ of the mask before iso-surfacing, in voxels of each axis: detail finer than the
+  /// voxel is the label's staircase. 0.8 keeps 4 % of the amplitude at the voxels' shortest
+  /// wavelength (two voxels: exp(−2π²σ²/λ²)); 0.6 capped at 1.5 mm, the former default, kept
+  /// 17 % (29 % on 3 mm voxels) and left creases the fold gate caught (meshing/README.md
+  /// "Smooth by design").
+  double smoothing_sigma_vox = 0.8;
+  double max_smoothing_sigma_mm = 3.0;  ///< cap on σ along thick-slice axes (mm; was 1.5)
+  /// Drop the label's voxels one voxel thin along an axis (neither neighbour inside: a plate one
+  /// slice thick past both neighbouring sections, a spur one pixel wide) before the surface: no
+  /// smooth surface at the grid's resolution carries them. Reported in the organ's warnings.
+  bool drop_thin_voxels = true;
   int remesh_iterations = 6;         ///< isotropic remeshing iterations
   bool tetrahedra = true;            ///< also build tetrahedral meshes
   /// Edge of the tetrahedral meshes (mm; 0 = edge_mm): their boundary facets and cells. The
@@ -69,13 +78,13 @@ struct MeshOptions {
   double max_radius_edge = 2.0;      ///< quality gate: every tet's circumradius / shortest edge
   /// Quality gate of an organ's own closed boundary without cut faces (not tubes, not inner
   /// walls): the largest fold between neighbouring triangles (deg; 0 = not checked). See
-  /// SurfaceGuarantees::max_fold_deg. Off by default: on GVF-segmented real gallbladders the
-  /// outer surface folds by 92–152° at a 1.5 mm edge and the remedies do not remove it (see
-  /// meshing/README.md); 60 suits reference masks and solver meshes on coarse scans.
-  double max_fold_deg = 0.0;
-  /// Smooth every axis by smoothing_sigma_vox × the coarsest spacing (a remedy): a label map's
-  /// shape is known to its coarsest voxel, so finer axes otherwise keep plates and steps thinner
-  /// than it (a 1 mm-thick last section on 3 mm pixels).
+  /// SurfaceGuarantees::max_fold_deg. On by default since the surface is band-limited to the
+  /// voxel and one-voxel-thin parts are dropped: over the real sweep the gallbladder's outer
+  /// surface folds by 24–43° (meshing/README.md).
+  double max_fold_deg = 60.0;
+  /// Smooth every axis by smoothing_sigma_vox × the coarsest spacing (a remedy): a
+  /// label map's shape is known to its coarsest voxel, so finer axes otherwise keep plates and
+  /// steps thinner than it (a 1 mm-thick last section on 3 mm pixels).
   bool smoothing_isotropic = false;
   bool enforce_quality = true;       ///< throw MeshQualityError when a gate fails (else only report)
   int quality_remedies = 6;          ///< an organ failing a gate is meshed again this many times at most: smoother, finer, both, smoother at a 1.25× edge, smoother isotropically, smoother still
@@ -105,7 +114,7 @@ struct OrganMesh {
   std::map<std::int32_t, std::string> region_names;  ///< tet region id → name ("gallbladder_wall", …)
   TetQuality volume_quality;
   double label_volume_mm3 = 0.0;           ///< voxel volume of the meshed component (and capped slab)
-  double dropped_volume_mm3 = 0.0;         ///< voxels outside the largest component, not meshed
+  double dropped_volume_mm3 = 0.0;         ///< voxels not meshed: outside the largest component, or one voxel thin
   double voxel_diagonal_mm = 0.0;
   std::vector<std::string> warnings;       ///< e.g. "touches the image border; capped flat"
   double seconds_surface = 0.0, seconds_tets = 0.0;

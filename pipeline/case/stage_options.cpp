@@ -68,8 +68,8 @@ void visit(Visitor& v, MeshStageOptions& o) {
               "a lumen pressure load step for the organs named, e.g. { trachea = 1.0 } (for the gallbladder instead of "
               "its indentation); {} = each organ's registry load case (gallbladder: the 5 mm probe; trachea: 2 kPa)");
   v.number("max_fold_deg", o.max_fold_deg, 0.0, 180.0, "deg",
-           "fold gate of an organ's uncut outer surface: largest angle between neighbouring triangles; 0 = off (default); 60 smooths a coarse "
-           "scan's staircase away before a solver sees it");
+           "fold gate of an organ's uncut outer surface: largest angle between neighbouring triangles (default 60; 0 = off): a crease "
+           "the surface edge cannot carry, which a solver's elements buckle at");
   v.boolean("material_band", o.material_band,
             "also write each organ's INP with the P5/P50/P95 variants of its materials (meshes/<organ>/band/)");
 }

@@ -48,9 +48,9 @@ struct MeshStageOptions {
   /// materials.json (default false).
   bool material_band = false;
   /// Fold gate of an organ's outer surface without cut faces: largest angle between neighbouring
-  /// triangles, deg (default 0 = off; 60 for solver meshes on coarse scans). A mesh failing it is
-  /// remeshed smoother (meshing's remedies); see meshing/README.md.
-  double max_fold_deg = 0.0;
+  /// triangles, deg (default 60; 0 = off). A mesh failing it is remeshed smoother (meshing's
+  /// remedies); see meshing/README.md.
+  double max_fold_deg = 60.0;
   MeshStageOptions();
 };
 

@@ -42,7 +42,7 @@ struct MeshFlags {
   std::vector<std::string> wall_mm;  // ORGAN=MM; an organ not named keeps the organ registry's wall
   bool no_tets = false, allow_failures = false;
   bool material_band = false;
-  double max_fold_deg = -1.0;  // < 0 = not given: off, or the run's [stages.mesh] max_fold_deg
+  double max_fold_deg = -1.0;  // < 0 = not given: the default (60), or the run's [stages.mesh] max_fold_deg
 };
 
 std::vector<std::string> split(const std::string& s, char sep) {
@@ -239,7 +239,7 @@ std::vector<Command> meshing_commands(CLI::App& app) {
                   "gallbladder 2, trachea 2.5), e.g. --wall-mm gallbladder=3");
   sub->add_option("--max-fold-deg", flags->max_fold_deg,
                   "fold gate of an organ's uncut outer surface (gallbladder): largest angle between neighbouring triangles,\n"
-                  "deg; a mesh failing it is remeshed smoother (default 0 = off; 60 for solver meshes on coarse scans)")
+                  "deg; a mesh failing it is remeshed smoother (default 60, or the run's [stages.mesh] max_fold_deg; 0 = off)")
       ->check(CLI::Range(0.0, 180.0));
   sub->add_flag("--no-tets", flags->no_tets, "surfaces only (no tetrahedral meshes)");
   sub->add_flag("--material-band", flags->material_band,

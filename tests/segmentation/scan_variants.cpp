@@ -304,6 +304,70 @@ Score score_against(const LabelMap& ref, const LabelMap& test, std::uint8_t test
   return r;
 }
 
+double enclosed_dice(const SurfaceMesh& surface, const LabelMap& lm, std::uint8_t value) {
+  const ImageGrid& g = lm.grid;
+  auto in_label = [&](std::int64_t i, std::int64_t j, std::int64_t k) {
+    if (!g.contains(i, j, k)) return false;
+    const std::uint8_t l = lm.labels[std::size_t(g.offset(i, j, k))];
+    return value == 0 ? l != 0 : l == value;
+  };
+  std::vector<Eigen::Vector3d> v;
+  Eigen::Vector3d lo = Eigen::Vector3d::Constant(1e300), hi = -lo;
+  for (const auto& p : surface.vertices_lps_mm) {
+    v.push_back(g.lps_mm_to_index(p));
+    lo = lo.cwiseMin(v.back()), hi = hi.cwiseMax(v.back());
+  }
+  for (std::int64_t k = 0; k < g.size_vox[2]; ++k)
+    for (std::int64_t j = 0; j < g.size_vox[1]; ++j)
+      for (std::int64_t i = 0; i < g.size_vox[0]; ++i)
+        if (in_label(i, j, k)) {
+          const Eigen::Vector3d q{double(i), double(j), double(k)};
+          lo = lo.cwiseMin(q), hi = hi.cwiseMax(q);
+        }
+  constexpr int S = 2;  // samples per voxel and axis, at ±1/4 voxel from its centre
+  std::array<std::int64_t, 3> a0{}, n{};
+  for (int a = 0; a < 3; ++a) a0[a] = std::int64_t(std::floor(lo[a])) - 1, n[a] = (std::int64_t(std::ceil(hi[a])) + 1 - a0[a] + 1) * S;
+  auto coord = [&](int a, std::int64_t t) { return double(a0[a]) - 0.5 + (double(t) + 0.5) / S; };
+  // Triangles by the sample rows (j, k) their box covers; a row's crossings along i by parity.
+  std::vector<std::vector<std::int32_t>> rows(std::size_t(n[1] * n[2]));
+  for (std::size_t t = 0; t < surface.triangles.size(); ++t) {
+    const auto& T = surface.triangles[t];
+    double jl = 1e300, jh = -1e300, kl = 1e300, kh = -1e300;
+    for (const int c : T) jl = std::min(jl, v[c][1]), jh = std::max(jh, v[c][1]), kl = std::min(kl, v[c][2]), kh = std::max(kh, v[c][2]);
+    const auto t0 = [&](int a, double x) { return std::max<std::int64_t>(0, std::int64_t(std::ceil((x - a0[a] + 0.5) * S - 0.5))); };
+    const auto t1 = [&](int a, double x) { return std::min<std::int64_t>(n[a] - 1, std::int64_t(std::floor((x - a0[a] + 0.5) * S - 0.5))); };
+    for (std::int64_t tk = t0(2, kl); tk <= t1(2, kh); ++tk)
+      for (std::int64_t tj = t0(1, jl); tj <= t1(1, jh); ++tj) rows[std::size_t(tj + n[1] * tk)].push_back(std::int32_t(t));
+  }
+  double both = 0, mesh = 0, label = 0;
+  std::vector<double> xs;
+  for (std::int64_t tk = 0; tk < n[2]; ++tk)
+    for (std::int64_t tj = 0; tj < n[1]; ++tj) {
+      const double y = coord(1, tj), z = coord(2, tk);
+      xs.clear();
+      for (const std::int32_t t : rows[std::size_t(tj + n[1] * tk)]) {
+        const auto& T = surface.triangles[std::size_t(t)];
+        const Eigen::Vector3d &A = v[T[0]], &B = v[T[1]], &C = v[T[2]];
+        const double d = (B[1] - A[1]) * (C[2] - A[2]) - (C[1] - A[1]) * (B[2] - A[2]);
+        if (d == 0) continue;
+        const double u = ((y - A[1]) * (C[2] - A[2]) - (C[1] - A[1]) * (z - A[2])) / d;
+        const double w = ((B[1] - A[1]) * (z - A[2]) - (y - A[1]) * (B[2] - A[2])) / d;
+        if (u < 0 || w < 0 || u + w > 1) continue;
+        xs.push_back(A[0] + u * (B[0] - A[0]) + w * (C[0] - A[0]));
+      }
+      std::sort(xs.begin(), xs.end());
+      std::size_t c = 0;
+      for (std::int64_t ti = 0; ti < n[0]; ++ti) {
+        const double x = coord(0, ti);
+        while (c < xs.size() && xs[c] < x) ++c;
+        const bool m = c % 2 == 1;
+        const bool l = in_label(std::llround(x), std::llround(y), std::llround(z));
+        both += m && l, mesh += m, label += l;
+      }
+    }
+  return mesh + label > 0 ? 2 * both / (mesh + label) : 0.0;
+}
+
 LabelMap air_under_reference(const Scan& s, float air_hu) {
   LabelMap m;
   m.grid = s.ct.grid;

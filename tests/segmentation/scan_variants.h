@@ -4,6 +4,7 @@
 // changed reference. Physical changes (slice thickness, field of view, tilt, noise) change the
 // voxels; storage changes (RAS order, sagittal slices) keep every voxel at its LPS position.
 
+#include "core/geometry.h"
 #include "core/volume.h"
 #include "segmentation/segment.h"
 
@@ -69,6 +70,11 @@ struct Score {
   double dice = 0, volume_error = 0;
 };
 Score score_against(const LabelMap& ref, const LabelMap& test, std::uint8_t test_label);
+
+/// Dice between the solid a closed surface encloses and the voxels of `lm` (label `value`; 0 =
+/// any nonzero), sampled at 2 × 2 × 2 points per voxel over both's box: how much of the label a
+/// smoothed surface keeps (not what the label would score: its staircase is the label's own).
+double enclosed_dice(const SurfaceMesh& surface, const LabelMap& lm, std::uint8_t value);
 
 /// An airway reference's own rule applied to the scan's CT: on each slice the reference labels,
 /// the air (below air_hu) that is connected in the slice to the reference there (label 1). On
