@@ -4,7 +4,8 @@
 // every one checked against the guarantees in meshing/quality.h. All coordinates are LPS mm.
 //
 // How a surface is made (chosen by measurement; see meshing/README.md for the figures): the
-// organ's largest connected component is smoothed lightly (Gaussian, σ ≈ 0.6 voxel) and
+// organ's largest connected component, less its one-voxel-thin parts, is band-limited to its
+// voxel (Gaussian, σ = 0.8 voxel) and
 // interpolated trilinearly; CGAL Mesh_3 samples the iso-surface of that field at the level
 // whose enclosed volume equals the label's voxel volume (so the smoothing does not shrink the
 // organ), and CGAL Polygon Mesh Processing remeshes it isotropically to the target edge length,
