@@ -114,14 +114,17 @@ std::vector<std::int32_t> components(const std::vector<std::uint8_t>& on, const 
 /// Drops the voxels one voxel thin: those with neither neighbour inside along some axis (a plate
 /// one slice thick sticking out past both neighbouring slices' sections, a spur one pixel wide).
 /// No smooth surface at the grid's resolution carries them: a surface round a part one voxel
-/// thick folds within half a voxel. Returns the voxels dropped (indices into the mask).
+/// thick folds within half a voxel. Returns the thin voxels (indices into the mask), dropped
+/// unless they are half the mask or more (then the mask is left as it is).
 std::vector<std::int64_t> drop_one_voxel_thin(std::vector<std::uint8_t>& mask, const std::array<std::int64_t, 3>& n) {
   const std::int64_t st[3] = {1, n[0], n[0] * n[1]};
   std::vector<std::int64_t> thin;
+  std::int64_t inside = 0;
   for (std::int64_t k = 0, x = 0; k < n[2]; ++k)
     for (std::int64_t j = 0; j < n[1]; ++j)
       for (std::int64_t i = 0; i < n[0]; ++i, ++x) {
         if (!mask[std::size_t(x)]) continue;
+        ++inside;
         const std::int64_t c[3] = {i, j, k};
         for (int a = 0; a < 3; ++a) {
           if (n[a] < 3) continue;
@@ -132,6 +135,9 @@ std::vector<std::int64_t> drop_one_voxel_thin(std::vector<std::uint8_t>& mask, c
           }
         }
       }
+  // Parts, not organs: a label that is mostly one voxel thin (an organ found on one slice) has
+  // no smooth surface at this grid; the caller refuses it.
+  if (2 * std::int64_t(thin.size()) >= inside) return thin;
   for (const std::int64_t x : thin) mask[std::size_t(x)] = 0;
   return thin;
 }
@@ -205,8 +211,14 @@ Prepared prepare(const LabelMap& lm, const MeshOrganSpec& spec, const MeshOption
       }
 
   std::int64_t thin = 0;  // label voxels dropped as one voxel thin (not the copies past a cut side)
+  const std::vector<std::int64_t> thin_voxels = o.drop_thin_voxels ? drop_one_voxel_thin(mask, n) : std::vector<std::int64_t>{};
+  if (!thin_voxels.empty() && mask[std::size_t(thin_voxels.front())])
+    throw MeshInputError(spec.name + " (label " + std::to_string(int(spec.label)) + ") is one voxel thin along an axis in " +
+                             std::to_string(thin_voxels.size()) + " of its voxels, half of it or more (an organ found on one slice?): "
+                             "no smooth surface at this grid carries it",
+                         "check the segmentation of the " + spec.name + " on the slices next to it");
   if (o.drop_thin_voxels)
-    for (const std::int64_t x : drop_one_voxel_thin(mask, n)) {
+    for (const std::int64_t x : thin_voxels) {
       const std::int64_t c[3] = {p.lo[0] + x % n[0], p.lo[1] + (x / n[0]) % n[1], p.lo[2] + x / (n[0] * n[1])};
       bool label_voxel = true;
       for (int a = 0; a < 3; ++a) label_voxel = label_voxel && c[a] >= p.b0[a] && c[a] <= p.b1[a];

@@ -67,7 +67,9 @@ struct MeshOptions {
   double max_smoothing_sigma_mm = 3.0;  ///< cap on σ along thick-slice axes (mm; was 1.5)
   /// Drop the label's voxels one voxel thin along an axis (neither neighbour inside: a plate one
   /// slice thick past both neighbouring sections, a spur one pixel wide) before the surface: no
-  /// smooth surface at the grid's resolution carries them. Reported in the organ's warnings.
+  /// smooth surface at the grid's resolution carries them. Reported in the organ's warnings. A
+  /// label half or more of which is that thin (an organ found on one slice) is refused
+  /// (MeshInputError).
   bool drop_thin_voxels = true;
   int remesh_iterations = 6;         ///< isotropic remeshing iterations
   bool tetrahedra = true;            ///< also build tetrahedral meshes

@@ -152,9 +152,10 @@ TEST(RunOptions, MeshingInputProblemsExitWith60AndWriteNothing) {
 
 // A mesh that fails a gate after meshing's remedies stops `run` with exit 61 naming the organ
 // and the figure, writes no mesh, and `--allow-quality-failures` writes it with every attempt in
-// quality.json. The scan: the phantom at 160² (2.5 mm pixels and slices); the organ: its
-// gallbladder on one slice only (a 2.5 mm plate of 99 voxels, as the segmentation once found it
-// on this scan), whose volume no remeshing holds within 3 %.
+// quality.json. The scan: the phantom at 160² (2.5 mm pixels and slices); the gate: a fold limit
+// of 1°, which no smooth surface of a 2.5 mm edge meets. Before it, the organ as the
+// segmentation once found it on this scan, on one slice only (a 2.5 mm plate of 99 voxels): one
+// voxel thin, it is refused as mesh input (no smooth surface at this grid carries it), fast.
 TEST(RunOptions, AMeshFailingAGateAfterItsRemediesStopsTheRunWith61) {
   ScratchDir tmp("gate-61");
   std::string log;
@@ -173,16 +174,25 @@ TEST(RunOptions, AMeshFailingAGateAfterItsRemediesStopsTheRunWith61) {
   for (std::int64_t k = 0; k < nz; ++k)
     if (k != mid) std::fill(one.labels.begin() + k * nx * ny, one.labels.begin() + (k + 1) * nx * ny, std::uint8_t(0));
   organsmith::write_label_map(one, tmp / "one_slice.nii.gz");
+  std::ofstream(tmp / "plate.toml") << "[case]\nname = \"plate\"\ninput = " << quoted(tmp / "scan" / "phantom" / "dicom")
+                                    << "\n[[organ]]\nname = \"gallbladder\"\nlabel_map = " << quoted(tmp / "one_slice.nii.gz")
+                                    << "\n";
+  EXPECT_EQ(run_cli("run " + quoted(tmp / "plate.toml") + " --out " + quoted(tmp / "plate"), &log),
+            int(organsmith::ExitCode::mesh_input))
+      << log;
+  EXPECT_NE(log.find("one voxel thin"), std::string::npos) << log;
+  EXPECT_FALSE(fs::exists(tmp / "plate" / "meshes"));
+
   std::ofstream(tmp / "case.toml") << "[case]\nname = \"gate\"\ninput = " << quoted(tmp / "scan" / "phantom" / "dicom")
-                                   << "\n[[organ]]\nname = \"gallbladder\"\nlabel_map = " << quoted(tmp / "one_slice.nii.gz")
-                                   << "\n";
+                                   << "\n[[organ]]\nname = \"gallbladder\"\nlabel_map = "
+                                   << quoted(tmp / "scan" / "labels.nii.gz") << "\n[stages.mesh]\nmax_fold_deg = 1\n";
   const fs::path out = tmp / "out";
   ASSERT_EQ(run_cli("run " + quoted(tmp / "case.toml") + " --out " + quoted(out), &log),
             int(organsmith::ExitCode::mesh_quality))
       << log;
   EXPECT_NE(log.find("also after meshing's remedies"), std::string::npos) << log;
-  EXPECT_NE(log.find("gallbladder: volume"), std::string::npos) << log;  // organ (surface) and figure
-  EXPECT_NE(log.find("limit"), std::string::npos) << log;
+  EXPECT_NE(log.find("gallbladder: "), std::string::npos) << log;  // organ (surface) and figure
+  EXPECT_NE(log.find("folded beyond 1°"), std::string::npos) << log;
   EXPECT_NE(log.find("--allow-quality-failures"), std::string::npos) << log;
   EXPECT_FALSE(fs::exists(out / "meshes")) << "a mesh failing its gate was written";
   EXPECT_FALSE(fs::exists(out / "snapshots"));
