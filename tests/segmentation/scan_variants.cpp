@@ -1,3 +1,6 @@
+// Over 400 lines: the sweeps' scan variants, their scoring against the reference and the
+// enclosed-solid Dice of a mesh share the grid helpers of this file's anonymous namespace.
+
 #include "scan_variants.h"
 
 #include <cstdlib>
